@@ -1,0 +1,27 @@
+# riemesh_core (alias riemesh::core): OpenMesh + Eigen + NanoVDB headers only.
+# Under emscripten, RIEMESH_OPENMESH_SOURCES / RIEMESH_WASM_INCLUDE point at sources fetched by scripts/setup-web.
+if(EMSCRIPTEN)
+  add_library(riemesh_openmesh STATIC ${RIEMESH_OPENMESH_SOURCES})
+  target_include_directories(riemesh_openmesh SYSTEM PUBLIC ${RIEMESH_OPENMESH_INCLUDE})
+  target_compile_definitions(riemesh_openmesh PUBLIC _USE_MATH_DEFINES OM_STATIC_BUILD)
+  set(RIEMESH_OPENMESH_TARGET riemesh_openmesh)
+  set(RIEMESH_THIRD_PARTY_INCLUDE ${RIEMESH_WASM_INCLUDE})
+else()
+  find_package(OpenMesh REQUIRED)
+  find_package(Eigen3 3.3 REQUIRED NO_MODULE)
+  set(RIEMESH_OPENMESH_TARGET OpenMeshCore Eigen3::Eigen)
+  set(RIEMESH_THIRD_PARTY_INCLUDE "")
+endif()
+
+file(GLOB RIEMESH_CORE_SOURCES CONFIGURE_DEPENDS ${PROJECT_SOURCE_DIR}/core/src/*.cpp
+     ${PROJECT_SOURCE_DIR}/core/src/detail/*.cpp)
+add_library(riemesh_core STATIC ${RIEMESH_CORE_SOURCES})
+add_library(riemesh::core ALIAS riemesh_core)
+target_compile_features(riemesh_core PUBLIC cxx_std_17)
+target_include_directories(riemesh_core PUBLIC ${PROJECT_SOURCE_DIR}/core/include
+                           PRIVATE ${PROJECT_SOURCE_DIR}/core/src)
+if(RIEMESH_THIRD_PARTY_INCLUDE)
+  target_include_directories(riemesh_core SYSTEM PUBLIC ${RIEMESH_THIRD_PARTY_INCLUDE})
+endif()
+target_compile_definitions(riemesh_core PUBLIC _USE_MATH_DEFINES)
+target_link_libraries(riemesh_core PUBLIC ${RIEMESH_OPENMESH_TARGET} PRIVATE riemesh_warnings)

@@ -1,0 +1,78 @@
+// riemesh/mesh.h: the deformable surface.
+//
+// A closed, oriented (normals out, counter-clockwise faces seen from outside), 2-manifold triangle
+// mesh in world space, with any number of connected components. Positions are double precision.
+// Per-vertex dynamic state (velocity) lives in an OpenMesh property so that it follows the vertex
+// through splits, collapses and garbage collection.
+#pragma once
+
+#include <OpenMesh/Core/Mesh/TriMesh_ArrayKernelT.hh>
+#include <Eigen/Core>
+#include <Eigen/Geometry>
+
+#include <cstddef>
+#include <string>
+#include <vector>
+
+namespace riemesh {
+
+using Vec3 = Eigen::Vector3d;
+using Mat3 = Eigen::Matrix3d;
+
+struct MeshTraits : public OpenMesh::DefaultTraits {
+    using Point = OpenMesh::Vec3d;
+    using Normal = OpenMesh::Vec3d;
+    VertexAttributes(OpenMesh::Attributes::Status);
+    EdgeAttributes(OpenMesh::Attributes::Status);
+    HalfedgeAttributes(OpenMesh::Attributes::PrevHalfedge | OpenMesh::Attributes::Status);
+    FaceAttributes(OpenMesh::Attributes::Status);
+};
+
+using Mesh = OpenMesh::TriMesh_ArrayKernelT<MeshTraits>;
+using VertexHandle = OpenMesh::VertexHandle;
+using HalfedgeHandle = OpenMesh::HalfedgeHandle;
+using EdgeHandle = OpenMesh::EdgeHandle;
+using FaceHandle = OpenMesh::FaceHandle;
+
+inline Vec3 toVec3(const Mesh::Point& p) { return Vec3(p[0], p[1], p[2]); }
+inline Mesh::Point toPoint(const Vec3& v) { return Mesh::Point(v.x(), v.y(), v.z()); }
+inline Vec3 position(const Mesh& mesh, VertexHandle v) { return toVec3(mesh.point(v)); }
+
+/// Name of the per-vertex velocity property (world units per iteration), OpenMesh::Vec3d.
+inline constexpr const char* kVelocityProperty = "riemesh:velocity";
+
+/// The velocity property of `mesh`, created (zero-initialised) if missing.
+OpenMesh::VPropHandleT<OpenMesh::Vec3d> velocityProperty(Mesh& mesh);
+
+/// Counts that describe the topology of a closed mesh (deleted elements are ignored).
+struct MeshTopology {
+    std::size_t vertices = 0;
+    std::size_t edges = 0;
+    std::size_t faces = 0;
+    int components = 0;      ///< connected components (through edges)
+    int euler = 0;           ///< V - E + F
+    int genus = 0;           ///< (2 * components - euler) / 2 for a closed orientable surface
+};
+
+/// Vertices, edges, faces, components, Euler characteristic and genus of `mesh`.
+MeshTopology topologyOf(const Mesh& mesh);
+
+/// Signed volume enclosed by `mesh` (world units cubed): positive when the normals point outward.
+double signedVolume(const Mesh& mesh);
+
+/// Per-vertex component labels (0..components-1), indexed by vertex idx(); -1 for deleted vertices.
+std::vector<int> componentLabels(const Mesh& mesh, int* componentCount = nullptr);
+
+/// Unit area-weighted vertex normal (outward for a correctly oriented mesh).
+Vec3 vertexNormal(const Mesh& mesh, VertexHandle v);
+
+/// Unit face normal (zero for a degenerate face).
+Vec3 faceNormal(const Mesh& mesh, FaceHandle f);
+
+/// Appends a copy of `src` to `dst` as new component(s).
+void appendMesh(Mesh& dst, const Mesh& src);
+
+/// Requests the status attributes needed by delete/collapse and the velocity property.
+void prepareMesh(Mesh& mesh);
+
+} // namespace riemesh

@@ -1,0 +1,85 @@
+// riemesh/metric.h: the Riemannian metric G(x) (paper 3.1, 4).
+//
+// G(x) is a symmetric positive-definite 3x3 matrix with eigenvalues in [1, muMax]. The metric length
+// of an edge (u, v) is sqrt((v-u)^T G(m) (v-u)) with G taken at the midpoint m (constant along the
+// edge). Since the eigenvalues are >= 1, metric lengths are never shorter than Euclidean ones.
+// Euclidean is the special case G = I and runs through the same code.
+#pragma once
+
+#include "riemesh/mesh.h"
+
+#include <functional>
+#include <memory>
+
+#include <nanovdb/NanoVDB.h>
+
+namespace riemesh {
+
+class MetricField {
+public:
+    virtual ~MetricField() = default;
+    /// G at a world-space point: SPD, eigenvalues in [1, maxEigenvalue()].
+    virtual Mat3 at(const Vec3& x) const = 0;
+    /// Upper bound of the eigenvalues of G over the whole domain (>= 1).
+    virtual double maxEigenvalue() const = 0;
+    /// True when G = I everywhere (callers may take the Euclidean fast path; results must not change).
+    virtual bool isEuclidean() const { return false; }
+};
+
+/// Metric length of the segment u-v (world-space points), with G taken at the midpoint.
+double metricLength(const MetricField& metric, const Vec3& u, const Vec3& v);
+
+/// Metric length of edge e of `mesh`.
+double metricLength(const MetricField& metric, const Mesh& mesh, EdgeHandle e);
+
+/// G = I.
+class EuclideanMetric final : public MetricField {
+public:
+    Mat3 at(const Vec3&) const override { return Mat3::Identity(); }
+    double maxEigenvalue() const override { return 1.0; }
+    bool isEuclidean() const override { return true; }
+};
+
+/// The same G everywhere (anisotropic when its eigenvalues differ).
+class ConstantMetric final : public MetricField {
+public:
+    /// `g` must be SPD with eigenvalues >= 1 (throws std::invalid_argument otherwise).
+    explicit ConstantMetric(const Mat3& g);
+    Mat3 at(const Vec3&) const override { return mG; }
+    double maxEigenvalue() const override { return mMax; }
+private:
+    Mat3 mG;
+    double mMax;
+};
+
+/// G given by a function of the world-space position (tests, analytic fields).
+class FunctionMetric final : public MetricField {
+public:
+    /// `maxEigenvalue` must bound the eigenvalues of every value `g` returns.
+    FunctionMetric(std::function<Mat3(const Vec3&)> g, double maxEigenvalue);
+    Mat3 at(const Vec3& x) const override { return mG(x); }
+    double maxEigenvalue() const override { return mMax; }
+private:
+    std::function<Mat3(const Vec3&)> mG;
+    double mMax;
+};
+
+/// G read from two NanoVDB Vec3f grids, trilinearly interpolated: `diag` = (gxx, gyy, gzz) with
+/// background (1,1,1) and `off` = (gxy, gxz, gyz) with background (0,0,0) (identity where inactive).
+/// The grids are not owned: keep their GridHandles alive as long as this object.
+class NanoMetric final : public MetricField {
+public:
+    NanoMetric(const nanovdb::Vec3fGrid* diag, const nanovdb::Vec3fGrid* off, double maxEigenvalue);
+    ~NanoMetric() override;
+    Mat3 at(const Vec3& x) const override;
+    double maxEigenvalue() const override { return mMax; }
+private:
+    struct Impl;
+    std::unique_ptr<Impl> mImpl;
+    double mMax;
+};
+
+/// Builds G from an orthonormal eigenbasis (columns of `basis`) and eigenvalues.
+Mat3 metricFromEigen(const Mat3& basis, const Vec3& eigenvalues);
+
+} // namespace riemesh

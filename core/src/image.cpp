@@ -1,0 +1,206 @@
+#include "riemesh/image.h"
+
+#include <nanovdb/util/IO.h>
+#include <nanovdb/util/SampleFromVoxels.h>
+
+#include <algorithm>
+#include <cmath>
+#include <sstream>
+#include <stdexcept>
+
+namespace riemesh {
+
+Vec3 ScalarImage::gradient(const Vec3& x) const
+{
+    const double h = 0.5 * voxelSize();
+    Vec3 g;
+    for (int a = 0; a < 3; ++a) {
+        Vec3 p = x, m = x;
+        p[a] += h;
+        m[a] -= h;
+        g[a] = (value(p) - value(m)) / (2 * h);
+    }
+    return g;
+}
+
+FunctionImage::FunctionImage(std::function<double(const Vec3&)> f, Box3 bounds, double voxelSize,
+                             std::function<Vec3(const Vec3&)> gradient)
+    : mF(std::move(f)), mGradient(std::move(gradient)), mBounds(bounds), mVoxelSize(voxelSize)
+{
+    if (!mF) throw std::invalid_argument("FunctionImage: empty function");
+    if (!(voxelSize > 0)) throw std::invalid_argument("FunctionImage: voxel size must be > 0");
+}
+
+Vec3 FunctionImage::gradient(const Vec3& x) const
+{
+    return mGradient ? mGradient(x) : ScalarImage::gradient(x);
+}
+
+DenseImage::DenseImage(int nx, int ny, int nz, std::vector<float> data, Vec3 origin, double voxelSize,
+                       double background)
+    : mN{nx, ny, nz}, mData(std::move(data)), mOrigin(origin), mVoxelSize(voxelSize), mBackground(background)
+{
+    if (nx < 2 || ny < 2 || nz < 2) throw std::invalid_argument("DenseImage: need at least 2 voxels per axis");
+    if (mData.size() != std::size_t(nx) * ny * nz) throw std::invalid_argument("DenseImage: data size mismatch");
+    if (!(voxelSize > 0)) throw std::invalid_argument("DenseImage: voxel size must be > 0");
+}
+
+double DenseImage::value(const Vec3& x) const
+{
+    const Vec3 p = (x - mOrigin) / mVoxelSize;
+    const int i = int(std::floor(p.x())), j = int(std::floor(p.y())), k = int(std::floor(p.z()));
+    const double fx = p.x() - i, fy = p.y() - j, fz = p.z() - k;
+    auto v = [&](int a, int b, int c) -> double {
+        if (a < 0 || b < 0 || c < 0 || a >= mN[0] || b >= mN[1] || c >= mN[2]) return mBackground;
+        return at(a, b, c);
+    };
+    const double c00 = v(i, j, k) * (1 - fx) + v(i + 1, j, k) * fx;
+    const double c10 = v(i, j + 1, k) * (1 - fx) + v(i + 1, j + 1, k) * fx;
+    const double c01 = v(i, j, k + 1) * (1 - fx) + v(i + 1, j, k + 1) * fx;
+    const double c11 = v(i, j + 1, k + 1) * (1 - fx) + v(i + 1, j + 1, k + 1) * fx;
+    return (c00 * (1 - fy) + c10 * fy) * (1 - fz) + (c01 * (1 - fy) + c11 * fy) * fz;
+}
+
+Vec3 DenseImage::gradient(const Vec3& x) const { return ScalarImage::gradient(x); }
+
+Box3 DenseImage::bounds() const
+{
+    return Box3(mOrigin, mOrigin + mVoxelSize * Vec3(mN[0] - 1, mN[1] - 1, mN[2] - 1));
+}
+
+NanoImage::NanoImage(const nanovdb::FloatGrid* grid) : mGrid(grid)
+{
+    if (!grid) throw std::invalid_argument("NanoImage: null grid");
+    mVoxelSize = grid->voxelSize()[0];
+    const auto bbox = grid->worldBBox();
+    mBounds = Box3(Vec3(bbox.min()[0], bbox.min()[1], bbox.min()[2]),
+                   Vec3(bbox.max()[0], bbox.max()[1], bbox.max()[2]));
+}
+
+NanoImage::~NanoImage() = default;
+
+double NanoImage::value(const Vec3& x) const
+{
+    const auto ijk = mGrid->worldToIndexF(nanovdb::Vec3f(float(x.x()), float(x.y()), float(x.z())));
+    auto acc = mGrid->getAccessor();
+    return nanovdb::createSampler<1>(acc)(ijk);
+}
+
+Vec3 NanoImage::gradient(const Vec3& x) const
+{
+    // Gradient of the trilinear interpolant in index space, mapped to world space.
+    const auto ijk = mGrid->worldToIndexF(nanovdb::Vec3f(float(x.x()), float(x.y()), float(x.z())));
+    auto acc = mGrid->getAccessor();
+    const nanovdb::Vec3f g = nanovdb::createSampler<1>(acc).gradient(ijk);
+    const auto w = mGrid->indexToWorldGradF(g);
+    return Vec3(w[0], w[1], w[2]);
+}
+
+// ---- NanoVolume -------------------------------------------------------------------------------
+
+NanoVolume::NanoVolume() = default;
+NanoVolume::NanoVolume(NanoVolume&&) noexcept = default;
+NanoVolume& NanoVolume::operator=(NanoVolume&&) noexcept = default;
+NanoVolume::~NanoVolume() = default;
+
+static double gershgorinBound(const nanovdb::Vec3fGrid* diag, const nanovdb::Vec3fGrid* off)
+{
+    // Largest eigenvalue <= max over voxels of max row sum |g_ii| + sum_j |g_ij| (Gershgorin);
+    // the diagonal and off-diagonal maxima are taken separately, which only loosens the bound.
+    double maxDiag = 1.0, maxOff = 0.0;
+    auto scan = [](const nanovdb::Vec3fGrid* grid, double& out, bool sum) {
+        const auto& tree = grid->tree();
+        const auto* leaf = tree.getFirstNode<0>();
+        for (uint32_t n = 0; n < tree.nodeCount(0); ++n, ++leaf) {
+            for (uint32_t i = 0; i < 512; ++i) {
+                const nanovdb::Vec3f v = leaf->getValue(i);
+                double m = sum ? 2.0 * std::max({std::abs(v[0]), std::abs(v[1]), std::abs(v[2])})
+                               : std::max({double(v[0]), double(v[1]), double(v[2])});
+                out = std::max(out, m);
+            }
+        }
+    };
+    scan(diag, maxDiag, false);
+    scan(off, maxOff, true);
+    return maxDiag + maxOff;
+}
+
+void NanoVolume::index()
+{
+    mImage = mDiag = mOff = -1;
+    for (int i = 0; i < int(mHandles.size()); ++i) {
+        const auto* meta = mHandles[i].gridMetaData();
+        if (!meta) continue;
+        const std::string name = meta->shortGridName();
+        if (name == kMetricDiagGrid) {
+            if (!mHandles[i].grid<nanovdb::Vec3f>())
+                throw std::runtime_error("nvdb: grid 'metric_diag' is not a Vec3f grid");
+            mDiag = i;
+        } else if (name == kMetricOffGrid) {
+            if (!mHandles[i].grid<nanovdb::Vec3f>())
+                throw std::runtime_error("nvdb: grid 'metric_off' is not a Vec3f grid");
+            mOff = i;
+        } else if (mImage < 0 && mHandles[i].grid<float>()) {
+            mImage = i;
+        }
+    }
+    if (mImage < 0) throw std::runtime_error("nvdb: the file holds no float grid to segment");
+    if ((mDiag < 0) != (mOff < 0))
+        throw std::runtime_error("nvdb: the metric needs both 'metric_diag' and 'metric_off' grids");
+    mMuMax = (mDiag >= 0) ? gershgorinBound(metricDiag(), metricOff()) : 1.0;
+}
+
+NanoVolume NanoVolume::read(const std::string& path)
+{
+    NanoVolume volume;
+    try {
+        volume.mHandles = nanovdb::io::readGrids<nanovdb::HostBuffer, std::vector>(path);
+    } catch (const std::exception& e) {
+        throw std::runtime_error("cannot read NanoVDB file '" + path + "': " + e.what());
+    }
+    if (volume.mHandles.empty()) throw std::runtime_error("NanoVDB file '" + path + "' holds no grid");
+    volume.index();
+    return volume;
+}
+
+NanoVolume NanoVolume::fromBytes(const std::uint8_t* data, std::size_t size)
+{
+    NanoVolume volume;
+    std::istringstream in(std::string(reinterpret_cast<const char*>(data), size), std::ios::binary);
+    try {
+        volume.mHandles = nanovdb::io::readGrids<nanovdb::HostBuffer, std::vector>(in);
+    } catch (const std::exception& e) {
+        throw std::runtime_error(std::string("cannot read NanoVDB data: ") + e.what());
+    }
+    if (volume.mHandles.empty()) throw std::runtime_error("NanoVDB data holds no grid");
+    volume.index();
+    return volume;
+}
+
+const nanovdb::FloatGrid* NanoVolume::imageGrid() const
+{
+    return mImage >= 0 ? mHandles[mImage].grid<float>() : nullptr;
+}
+const nanovdb::Vec3fGrid* NanoVolume::metricDiag() const
+{
+    return mDiag >= 0 ? mHandles[mDiag].grid<nanovdb::Vec3f>() : nullptr;
+}
+const nanovdb::Vec3fGrid* NanoVolume::metricOff() const
+{
+    return mOff >= 0 ? mHandles[mOff].grid<nanovdb::Vec3f>() : nullptr;
+}
+std::string NanoVolume::imageName() const
+{
+    return mImage >= 0 ? std::string(mHandles[mImage].gridMetaData()->shortGridName()) : std::string();
+}
+std::string NanoVolume::imageClass() const
+{
+    if (mImage < 0) return "unknown";
+    switch (mHandles[mImage].gridMetaData()->gridClass()) {
+    case nanovdb::GridClass::FogVolume: return "fog";
+    case nanovdb::GridClass::LevelSet: return "levelset";
+    default: return "unknown";
+    }
+}
+
+} // namespace riemesh

@@ -1,0 +1,76 @@
+#include "riemesh/metric.h"
+
+#include <nanovdb/util/SampleFromVoxels.h>
+
+#include <Eigen/Eigenvalues>
+
+#include <cmath>
+#include <stdexcept>
+
+namespace riemesh {
+
+double metricLength(const MetricField& metric, const Vec3& u, const Vec3& v)
+{
+    const Vec3 d = v - u;
+    if (metric.isEuclidean()) return d.norm();
+    const Mat3 g = metric.at(0.5 * (u + v));
+    return std::sqrt(std::max(0.0, d.dot(g * d)));
+}
+
+double metricLength(const MetricField& metric, const Mesh& mesh, EdgeHandle e)
+{
+    auto h = mesh.halfedge_handle(e, 0);
+    return metricLength(metric, position(mesh, mesh.from_vertex_handle(h)),
+                        position(mesh, mesh.to_vertex_handle(h)));
+}
+
+ConstantMetric::ConstantMetric(const Mat3& g) : mG(g)
+{
+    if (!g.isApprox(g.transpose(), 1e-9)) throw std::invalid_argument("ConstantMetric: G is not symmetric");
+    Eigen::SelfAdjointEigenSolver<Mat3> eig(g);
+    if (eig.eigenvalues().minCoeff() < 1.0 - 1e-9)
+        throw std::invalid_argument("ConstantMetric: eigenvalues of G must be >= 1");
+    mMax = eig.eigenvalues().maxCoeff();
+}
+
+FunctionMetric::FunctionMetric(std::function<Mat3(const Vec3&)> g, double maxEigenvalue)
+    : mG(std::move(g)), mMax(maxEigenvalue)
+{
+    if (!mG) throw std::invalid_argument("FunctionMetric: empty function");
+    if (!(maxEigenvalue >= 1.0)) throw std::invalid_argument("FunctionMetric: maxEigenvalue must be >= 1");
+}
+
+Mat3 metricFromEigen(const Mat3& basis, const Vec3& eigenvalues)
+{
+    return basis * eigenvalues.asDiagonal() * basis.transpose();
+}
+
+struct NanoMetric::Impl {
+    const nanovdb::Vec3fGrid* diag;
+    const nanovdb::Vec3fGrid* off;
+};
+
+NanoMetric::NanoMetric(const nanovdb::Vec3fGrid* diag, const nanovdb::Vec3fGrid* off, double maxEigenvalue)
+    : mImpl(new Impl{diag, off}), mMax(maxEigenvalue)
+{
+    if (!diag || !off) throw std::invalid_argument("NanoMetric: metric_diag and metric_off grids are required");
+}
+
+NanoMetric::~NanoMetric() = default;
+
+Mat3 NanoMetric::at(const Vec3& x) const
+{
+    // Both grids share one transform (written together by riemesh::vdb).
+    const auto ijk = mImpl->diag->worldToIndexF(nanovdb::Vec3f(float(x.x()), float(x.y()), float(x.z())));
+    auto diagAcc = mImpl->diag->getAccessor();
+    auto offAcc = mImpl->off->getAccessor();
+    const nanovdb::Vec3f d = nanovdb::createSampler<1>(diagAcc)(ijk);
+    const nanovdb::Vec3f o = nanovdb::createSampler<1>(offAcc)(ijk);
+    Mat3 g;
+    g << d[0], o[0], o[1],
+         o[0], d[1], o[2],
+         o[1], o[2], d[2];
+    return g;
+}
+
+} // namespace riemesh

@@ -1,0 +1,64 @@
+#include "riemesh/image.h"
+#include "riemesh/metric.h"
+
+#include <doctest/doctest.h>
+
+#include <stdexcept>
+
+using namespace riemesh;
+
+TEST_CASE("metric: Euclidean length equals the Euclidean distance")
+{
+    EuclideanMetric g;
+    CHECK(metricLength(g, Vec3(0, 0, 0), Vec3(3, 4, 0)) == doctest::Approx(5.0));
+}
+
+TEST_CASE("metric: a constant anisotropic metric scales lengths by sqrt(mu) along its axis")
+{
+    Mat3 g = Mat3::Identity();
+    g(2, 2) = 4.0;
+    ConstantMetric m(g);
+    CHECK(metricLength(m, Vec3(0, 0, 0), Vec3(0, 0, 1)) == doctest::Approx(2.0));
+    CHECK(metricLength(m, Vec3(0, 0, 0), Vec3(1, 0, 0)) == doctest::Approx(1.0));
+    CHECK(m.maxEigenvalue() == doctest::Approx(4.0));
+}
+
+TEST_CASE("metric: eigenvalues below 1 are refused")
+{
+    Mat3 g = Mat3::Identity() * 0.5;
+    CHECK_THROWS_AS(ConstantMetric{g}, std::invalid_argument);
+}
+
+TEST_CASE("metric: a function metric is evaluated at the edge midpoint")
+{
+    FunctionMetric m([](const Vec3& x) { return x.x() > 0 ? Mat3(Mat3::Identity() * 4.0) : Mat3(Mat3::Identity()); }, 4.0);
+    CHECK(metricLength(m, Vec3(-1, 0, 0), Vec3(-0.5, 0, 0)) == doctest::Approx(0.5));
+    CHECK(metricLength(m, Vec3(0.5, 0, 0), Vec3(1, 0, 0)) == doctest::Approx(1.0));
+}
+
+TEST_CASE("metric: built from an eigenbasis it has those eigenvalues")
+{
+    Mat3 basis = Eigen::AngleAxisd(0.3, Vec3(1, 1, 0).normalized()).toRotationMatrix();
+    Mat3 g = metricFromEigen(basis, Vec3(1, 2, 9));
+    CHECK((g * basis.col(2) - 9.0 * basis.col(2)).norm() < 1e-12);
+}
+
+TEST_CASE("image: dense image interpolates trilinearly and its gradient follows a linear ramp")
+{
+    std::vector<float> data(4 * 4 * 4);
+    for (int k = 0; k < 4; ++k)
+        for (int j = 0; j < 4; ++j)
+            for (int i = 0; i < 4; ++i) data[(k * 4 + j) * 4 + i] = float(2 * i + j);
+    DenseImage img(4, 4, 4, data, Vec3(10, 0, 0), 0.5);
+    CHECK(img.value(Vec3(10.25, 0.5, 0.5)) == doctest::Approx(2 * 0.5 + 1));
+    const Vec3 g = img.gradient(Vec3(10.6, 0.6, 0.6));
+    CHECK(g.x() == doctest::Approx(4.0));
+    CHECK(g.y() == doctest::Approx(2.0));
+}
+
+TEST_CASE("image: function image uses its exact gradient when given")
+{
+    FunctionImage img([](const Vec3& x) { return x.squaredNorm(); }, Box3(Vec3(-1, -1, -1), Vec3(1, 1, 1)), 1.0,
+                      [](const Vec3& x) { return Vec3(2 * x); });
+    CHECK(img.gradient(Vec3(1, 2, 3)).isApprox(Vec3(2, 4, 6)));
+}
