@@ -1,0 +1,97 @@
+// riemesh/evolution.h: the order of the steps, and the loop to convergence (paper 3, 5).
+//
+// One iteration: forces -> integration -> regularity -> collision detection -> topology changes ->
+// compaction. `evolve` runs to convergence (mean kinetic energy stabilised) or a cap;
+// `Evolution::step()` advances one iteration for interactive use.
+#pragma once
+
+#include "riemesh/forces.h"
+#include "riemesh/image.h"
+#include "riemesh/integration.h"
+#include "riemesh/metric.h"
+
+#include <cstddef>
+#include <functional>
+#include <string>
+#include <utility>
+#include <vector>
+
+namespace riemesh {
+
+struct IterationStats {
+    int iteration = 0;
+    std::size_t vertices = 0;
+    double meanKineticEnergy = 0;
+    int splits = 0, collapses = 0, flips = 0, merges = 0, cuts = 0;
+    double milliseconds = 0;
+};
+
+enum class StopReason { Running, Converged, IterationCap, Interrupted, VertexCap };
+const char* toString(StopReason reason);
+
+struct EvolutionOptions {
+    double delta = 1.0;          ///< shortest edge, metric length (world units)
+    double zeta = 2.5;           ///< longest/shortest edge ratio
+    double vmaxFraction = 0.5;   ///< vmax = vmaxFraction * delta (world units per iteration)
+    ForceOptions forces;
+    double mass = 1.0;
+    double damping = 0.5;
+    int maxIterations = 3000;
+    int minIterations = 20;
+    /// Converged when the mean kinetic energy, relative to delta^2, stays below energyThreshold
+    /// over convergenceWindow iterations, or its relative change over the window is below
+    /// relativeChange while no topology event happened.
+    double energyThreshold = 1e-5;
+    int convergenceWindow = 25;
+    double relativeChange = 0.02;
+    std::size_t maxVertices = 4'000'000; ///< stop with VertexCap beyond this
+    /// Called after every iteration; return false to interrupt.
+    std::function<bool(const IterationStats&)> progress;
+};
+
+struct EvolutionStats {
+    std::vector<IterationStats> iterations;
+    StopReason reason = StopReason::Running;
+    double seconds = 0;
+    int splits = 0, collapses = 0, flips = 0, merges = 0, cuts = 0;
+};
+
+class Evolution {
+public:
+    /// Keeps references to mesh, image and metric: they must outlive this object.
+    Evolution(Mesh& mesh, const ScalarImage& image, const MetricField& metric, const EvolutionOptions& options = {});
+    /// One iteration; returns its statistics. Does nothing once done().
+    IterationStats step();
+    bool done() const { return mReason != StopReason::Running; }
+    StopReason reason() const { return mReason; }
+    const std::vector<IterationStats>& history() const { return mHistory; }
+    const EvolutionOptions& options() const { return mOptions; }
+    /// Changes parameters on the fly (viewer); clears a previous convergence.
+    void setOptions(const EvolutionOptions& options);
+    /// Marks the evolution interrupted.
+    void interrupt() { mReason = StopReason::Interrupted; }
+
+private:
+    Mesh& mMesh;
+    const ScalarImage& mImage;
+    const MetricField& mMetric;
+    EvolutionOptions mOptions;
+    std::vector<IterationStats> mHistory;
+    std::vector<Vec3> mForces;
+    StopReason mReason = StopReason::Running;
+    int mLastTopologyEvent = 0;
+    void updateConvergence();
+};
+
+/// Runs an Evolution until it stops.
+EvolutionStats evolve(Mesh& mesh, const ScalarImage& image, const MetricField& metric,
+                      const EvolutionOptions& options = {});
+
+/// The default initialisation: the image's bounds() inset by one voxel, as a box mesh with edges of
+/// about `edgeLength` (world units), that deflates onto the object.
+Mesh makeInitialBox(const ScalarImage& image, double edgeLength);
+
+/// Spheres ("bubbles", centre and radius in world units) that inflate inside the object.
+Mesh makeBubbles(const std::vector<std::pair<Vec3, double>>& spheres, double edgeLength);
+
+} // namespace riemesh

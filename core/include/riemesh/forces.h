@@ -1,0 +1,31 @@
+// riemesh/forces.h: the forces of the dynamics (paper 3.3, 5).
+//
+// F_int: regularising forces (umbrella/Laplacian, split into a tangential part that evens the
+// sampling and a normal part that smooths curvature). F_ext: the inflation/deflation force along the
+// vertex normal that drives vertices toward the isosurface I = iso, plus optional attraction toward
+// strong gradients. Forces are displacements per iteration squared times mass (world units).
+#pragma once
+
+#include "riemesh/image.h"
+#include "riemesh/mesh.h"
+
+#include <vector>
+
+namespace riemesh {
+
+struct ForceOptions {
+    double iso = 0.5;             ///< isovalue of the surface to recover (image intensity)
+    double contrast = 0.0;        ///< intensity scale of (I - iso) for full push; 0 = automatic
+    bool objectBrighter = true;   ///< the object is where I > iso (else where I < iso)
+    double externalWeight = 1.0;  ///< inflation/deflation strength (x delta)
+    double internalWeight = 0.3;  ///< tangential umbrella (sampling regularity)
+    double curvatureWeight = 0.05;///< normal umbrella (smoothing, shrinks curved parts)
+    double gradientWeight = 0.0;  ///< attraction toward high |grad I| along the normal
+};
+
+/// Per-vertex total force (F_int + F_ext), indexed by vertex idx(); `delta` (world units) sets the
+/// force scale. Deleted vertices get zero.
+void computeForces(const Mesh& mesh, const ScalarImage& image, const ForceOptions& options, double delta,
+                   std::vector<Vec3>& forces);
+
+} // namespace riemesh

@@ -1,0 +1,32 @@
+// riemesh/regularity.h: keep every edge's metric length within [delta, zeta*delta] (paper 3.1, Fig. 1).
+#pragma once
+
+#include "riemesh/metric.h"
+#include "riemesh/topology.h"
+
+#include <vector>
+
+namespace riemesh {
+
+struct RegularityOptions {
+    double delta = 1.0;  ///< shortest allowed edge (metric length, world units measured with G)
+    double zeta = 2.5;   ///< ratio longest/shortest; >= 2.5 keeps halves of a split edge >= delta
+    int maxPasses = 4;   ///< split/collapse/flip sweeps per call
+    bool flips = true;   ///< flip edges to improve valences and angles
+};
+
+struct RegularityStats {
+    int splits = 0;
+    int collapses = 0;
+    int flips = 0;
+    int tooShort = 0;  ///< edges still shorter than delta at the end (guards refused the collapse)
+    int tooLong = 0;   ///< edges still longer than zeta*delta at the end
+    /// Short edges whose collapse would pinch a tunnel: handed to the topology step.
+    std::vector<TunnelCandidate> tunnels;
+};
+
+/// Splits long edges, collapses short ones and flips for valence/angle quality, until every edge
+/// is within [delta, zeta*delta] (metric length) or maxPasses is reached.
+RegularityStats enforceRegularity(Mesh& mesh, const MetricField& metric, const RegularityOptions& options = {});
+
+} // namespace riemesh
