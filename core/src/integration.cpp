@@ -1,0 +1,41 @@
+#include "riemesh/integration.h"
+
+#include <cmath>
+
+namespace riemesh {
+
+IntegrationStats integrate(Mesh& mesh, const std::vector<Vec3>& forces, const IntegrationOptions& options)
+{
+    IntegrationStats stats;
+    const auto velocity = velocityProperty(mesh);
+    const double dt = options.timeStep;
+    const double invMass = 1.0 / options.mass;
+    double energy = 0;
+    std::size_t count = 0;
+    for (auto v : mesh.vertices()) {
+        const auto& vel = mesh.property(velocity, v);
+        Vec3 u(vel[0], vel[1], vel[2]);
+        const Vec3& f = forces[v.idx()];
+        // Semi-implicit Euler on m x'' = -gamma x' + F.
+        u += dt * invMass * (f - options.damping * u);
+        Vec3 d = dt * u;
+        const double len = d.norm();
+        if (len > options.vmax) {
+            d *= options.vmax / len;
+            u = d / dt;
+        }
+        if (!std::isfinite(d.x()) || !std::isfinite(d.y()) || !std::isfinite(d.z())) {
+            d.setZero();
+            u.setZero();
+        }
+        mesh.point(v) += toPoint(d);
+        mesh.property(velocity, v) = toPoint(u);
+        energy += 0.5 * options.mass * u.squaredNorm();
+        stats.maxDisplacement = std::max(stats.maxDisplacement, d.norm());
+        ++count;
+    }
+    stats.meanKineticEnergy = count ? energy / double(count) : 0.0;
+    return stats;
+}
+
+} // namespace riemesh

@@ -1,0 +1,115 @@
+// Forces and integration: the force points toward the isosurface, vanishes on it, and every
+// displacement is clamped to vmax.
+#include "mesh_invariants.h"
+#include "riemesh/forces.h"
+#include "riemesh/integration.h"
+#include "riemesh/primitives.h"
+
+#include <doctest/doctest.h>
+
+#include <cmath>
+
+using namespace riemesh;
+
+namespace {
+
+FunctionImage ballImage(double radius)
+{
+    return FunctionImage([radius](const Vec3& x) { return 0.5 + 0.5 * std::tanh(radius - x.norm()); },
+                         Box3(Vec3::Constant(-2 * radius), Vec3::Constant(2 * radius)), 1.0);
+}
+
+double meanRadialForce(const Mesh& mesh, const std::vector<Vec3>& forces)
+{
+    double sum = 0;
+    for (auto v : mesh.vertices()) sum += forces[v.idx()].dot(position(mesh, v).normalized());
+    return sum / double(mesh.n_vertices());
+}
+
+} // namespace
+
+TEST_CASE("forces: a sphere outside the object is pushed inward, inside it is pushed outward")
+{
+    const auto image = ballImage(8.0);
+    ForceOptions options;
+    options.iso = 0.5;
+    std::vector<Vec3> forces;
+    Mesh outside = makeIcosphere(Vec3::Zero(), 11.0, 3);
+    computeForces(outside, image, options, 1.0, forces);
+    CHECK(meanRadialForce(outside, forces) < -0.5);
+    Mesh inside = makeIcosphere(Vec3::Zero(), 5.0, 3);
+    computeForces(inside, image, options, 1.0, forces);
+    CHECK(meanRadialForce(inside, forces) > 0.5);
+}
+
+TEST_CASE("forces: on the isosurface the external force nearly vanishes")
+{
+    const auto image = ballImage(8.0);
+    ForceOptions options;
+    options.internalWeight = 0;
+    options.curvatureWeight = 0;
+    std::vector<Vec3> forces;
+    Mesh onSurface = makeIcosphere(Vec3::Zero(), 8.0, 3);
+    computeForces(onSurface, image, options, 1.0, forces);
+    CHECK(std::abs(meanRadialForce(onSurface, forces)) < 0.02);
+}
+
+TEST_CASE("forces: a dark object (objectBrighter = false) reverses the push")
+{
+    const double radius = 8.0;
+    FunctionImage dark([radius](const Vec3& x) { return 0.5 - 0.5 * std::tanh(radius - x.norm()); },
+                       Box3(Vec3::Constant(-16), Vec3::Constant(16)), 1.0);
+    ForceOptions options;
+    options.objectBrighter = false;
+    std::vector<Vec3> forces;
+    Mesh outside = makeIcosphere(Vec3::Zero(), 11.0, 3);
+    computeForces(outside, dark, options, 1.0, forces);
+    CHECK(meanRadialForce(outside, forces) < -0.5);
+}
+
+TEST_CASE("forces: the tangential umbrella evens out a perturbed sampling without moving the surface")
+{
+    Mesh sphere = makeIcosphere(Vec3::Zero(), 8.0, 3);
+    FunctionImage flat([](const Vec3&) { return 0.5; }, Box3(Vec3::Constant(-16), Vec3::Constant(16)), 1.0);
+    ForceOptions options;
+    options.externalWeight = 0;
+    options.curvatureWeight = 0;
+    std::vector<Vec3> forces;
+    computeForces(sphere, flat, options, 1.0, forces);
+    for (auto v : sphere.vertices()) {
+        CHECK(std::abs(forces[v.idx()].dot(vertexNormal(sphere, v))) < 1e-9);
+    }
+}
+
+TEST_CASE("integration: displacements never exceed vmax and the kinetic energy is reported")
+{
+    Mesh sphere = makeIcosphere(Vec3::Zero(), 8.0, 2);
+    std::vector<Vec3> forces(sphere.n_vertices(), Vec3(100, 0, 0));
+    IntegrationOptions options;
+    options.vmax = 0.25;
+    std::vector<Vec3> before;
+    for (auto v : sphere.vertices()) before.push_back(position(sphere, v));
+    const auto stats = integrate(sphere, forces, options);
+    for (auto v : sphere.vertices()) CHECK((position(sphere, v) - before[v.idx()]).norm() <= 0.25 + 1e-12);
+    CHECK(stats.maxDisplacement == doctest::Approx(0.25));
+    CHECK(stats.meanKineticEnergy == doctest::Approx(0.5 * 0.25 * 0.25));
+    CHECK_MESH_OK(sphere);
+}
+
+TEST_CASE("integration: a damped vertex under a spring force comes to rest at the spring's zero")
+{
+    Mesh sphere = makeIcosphere(Vec3::Zero(), 1.0, 0);
+    IntegrationOptions options;
+    options.vmax = 10;
+    std::vector<Vec3> forces(sphere.n_vertices());
+    const VertexHandle v0 = *sphere.vertices().begin();
+    const Vec3 rest = position(sphere, v0) + Vec3(0.3, 0, 0);
+    double energy = 1;
+    for (int i = 0; i < 60; ++i) {
+        for (auto v : sphere.vertices()) forces[v.idx()] = Vec3::Zero();
+        forces[v0.idx()] = 0.5 * (rest - position(sphere, v0));
+        energy = integrate(sphere, forces, options).meanKineticEnergy;
+    }
+    CHECK((position(sphere, v0) - rest).norm() < 1e-4);
+    CHECK(energy < 1e-8);
+}
