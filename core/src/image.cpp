@@ -122,6 +122,10 @@ static double gershgorinBound(const nanovdb::Vec3fGrid* diag, const nanovdb::Vec
     };
     scan(diag, maxDiag, false);
     scan(off, maxOff, true);
+    // Constant regions may be stored as tiles, which the leaf scan misses: the root statistics (the
+    // longest vector, when the writer computed them) bound every component of every value.
+    maxDiag = std::max(maxDiag, double(diag->tree().root().maximum().length()));
+    maxOff = std::max(maxOff, 2.0 * double(off->tree().root().maximum().length()));
     return maxDiag + maxOff;
 }
 
