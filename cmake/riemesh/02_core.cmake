@@ -1,9 +1,12 @@
 # riemesh_core (alias riemesh::core): OpenMesh + Eigen + NanoVDB headers only.
-# Under emscripten, RIEMESH_OPENMESH_SOURCES / RIEMESH_WASM_INCLUDE point at sources fetched by scripts/setup-web.
+# Under emscripten, RIEMESH_OPENMESH_SOURCES / RIEMESH_WASM_INCLUDE point at sources fetched by
+# scripts/setup-web (set by 00_wasm.cmake): OpenMesh Core is compiled from its Debian source package.
 if(EMSCRIPTEN)
   add_library(riemesh_openmesh STATIC ${RIEMESH_OPENMESH_SOURCES})
   target_include_directories(riemesh_openmesh SYSTEM PUBLIC ${RIEMESH_OPENMESH_INCLUDE})
   target_compile_definitions(riemesh_openmesh PUBLIC _USE_MATH_DEFINES OM_STATIC_BUILD)
+  target_compile_features(riemesh_openmesh PUBLIC cxx_std_17)
+  target_link_libraries(riemesh_openmesh PUBLIC riemesh_wasm)
   set(RIEMESH_OPENMESH_TARGET riemesh_openmesh)
   set(RIEMESH_THIRD_PARTY_INCLUDE ${RIEMESH_WASM_INCLUDE})
 else()

@@ -27,7 +27,6 @@ Mesh makeBox(const Vec3& lo, const Vec3& hi, double edgeLength)
     if (!(edgeLength > 0)) throw std::invalid_argument("makeBox: edge length must be > 0");
     if (!(hi.array() > lo.array()).all()) throw std::invalid_argument("makeBox: empty box");
     Mesh mesh;
-    prepareMesh(mesh);
     const Vec3 size = hi - lo;
     int n[3];
     for (int a = 0; a < 3; ++a) n[a] = std::max(1, int(std::ceil(size[a] / edgeLength - 1e-9)));
@@ -70,6 +69,7 @@ Mesh makeBox(const Vec3& lo, const Vec3& hi, double edgeLength)
             }
         }
     }
+    prepareMesh(mesh); // after add_vertex: new vertices' velocities would be uninitialised
     return mesh;
 }
 
@@ -108,11 +108,11 @@ Mesh makeIcosphere(const Vec3& center, double radius, int subdivisions)
         tris.swap(next);
     }
     Mesh mesh;
-    prepareMesh(mesh);
     std::vector<VertexHandle> vh;
     vh.reserve(pts.size());
     for (auto& p : pts) vh.push_back(mesh.add_vertex(toPoint(center + radius * p)));
     for (auto& f : tris) addOriented(mesh, vh[f[0]], vh[f[1]], vh[f[2]], center);
+    prepareMesh(mesh); // after add_vertex: new vertices' velocities would be uninitialised
     return mesh;
 }
 
@@ -123,7 +123,6 @@ Mesh makeTorus(const Vec3& center, double majorRadius, double minorRadius, int m
         throw std::invalid_argument("makeTorus: need majorRadius > minorRadius > 0");
     if (majorSegments < 3 || minorSegments < 3) throw std::invalid_argument("makeTorus: need >= 3 segments");
     Mesh mesh;
-    prepareMesh(mesh);
     std::vector<VertexHandle> vh(std::size_t(majorSegments) * minorSegments);
     for (int i = 0; i < majorSegments; ++i) {
         const double u = 2 * M_PI * i / majorSegments;
@@ -145,6 +144,7 @@ Mesh makeTorus(const Vec3& center, double majorRadius, double minorRadius, int m
             addOriented(mesh, a, c, d, tube);
         }
     }
+    prepareMesh(mesh); // after add_vertex: new vertices' velocities would be uninitialised
     return mesh;
 }
 
