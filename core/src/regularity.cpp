@@ -1,0 +1,357 @@
+// regularity.cpp: restore delta <= d_R(u, v) <= zeta * delta on every edge (paper 3.1, Fig. 1).
+//
+// One pass = measure every edge once, split the long edges (Euclidean-longest first, new long
+// edges are queued as they appear), collapse the short ones (shortest first, toward the midpoint; the
+// endpoints are tried when the midpoint is refused), then one sweep of flips that lower the valence
+// deviation from 6 (or, at equal deviation, restore the Delaunay-like angle condition measured in
+// the metric). Passes repeat until one changes nothing or maxPasses is reached. On a mesh that is
+// already regular one call costs one length evaluation and one flip test per edge, with no
+// per-edge allocation.
+#include "riemesh/regularity.h"
+
+#include "riemesh/edge_ops.h"
+
+#include "detail/edge_guards.h"
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <cstdint>
+
+namespace riemesh {
+
+namespace {
+
+/// An edge waiting in a split or collapse queue. An entry whose edge no longer has the metric
+/// length it was queued with is stale and skipped: every edit re-queues the edges it changes.
+struct QueuedEdge {
+    double length;   ///< metric length when queued
+    double priority; ///< heap key: Euclidean length for splits (world units), metric length for collapses
+    int edge;        ///< edge idx()
+};
+
+/// Flips with equal valence deviation must beat the Delaunay-like condition by this much
+/// (sum of the cotangents of the two opposite angles, measured in the metric).
+constexpr double kDelaunayTolerance = 1e-2;
+/// A regularity flip may not fold the surface: the new dihedral angle's cosine must reach
+/// min(old cosine, kFlipFlatCosine) (about 26 degrees, or the old angle if that was sharper).
+constexpr double kFlipFlatCosine = 0.9;
+
+int squared(int x) { return x * x; }
+
+class Regularizer {
+public:
+    Regularizer(Mesh& mesh, const MetricField& metric, const RegularityOptions& options, RegularityStats& stats)
+        : mMesh(mesh), mMetric(metric), mStats(stats), mLo(options.delta),
+          mHi(options.zeta * options.delta)
+    {
+    }
+
+    /// Euclidean length of edge e (world units).
+    double euclideanLength(EdgeHandle e) const
+    {
+        const HalfedgeHandle h = mMesh.halfedge_handle(e, 0);
+        return (position(mMesh, mMesh.from_vertex_handle(h)) - position(mMesh, mMesh.to_vertex_handle(h))).norm();
+    }
+
+    /// Metric length of edge e.
+    double length(EdgeHandle e) const
+    {
+        const HalfedgeHandle h = mMesh.halfedge_handle(e, 0);
+        return metricLength(mMetric, position(mMesh, mMesh.from_vertex_handle(h)),
+                            position(mMesh, mMesh.to_vertex_handle(h)));
+    }
+
+    /// Measures every edge once, queues the long and the short ones and counts the valences.
+    /// The hot loop of an already-regular mesh: raw indices, no allocation, and with a Euclidean
+    /// metric the squared length is compared with the squared bounds (the same classification as
+    /// metricLength, without a call and a square root per edge).
+    void measure()
+    {
+        mLong.clear();
+        mShort.clear();
+        mValence.assign(mMesh.n_vertices(), 0);
+        const bool euclidean = mMetric.isEuclidean();
+        const double lo2 = mLo * mLo, hi2 = mHi * mHi;
+        const Mesh::Point* points = mMesh.points();
+        const int edgeCount = int(mMesh.n_edges());
+        for (int i = 0; i < edgeCount; ++i) {
+            const EdgeHandle e(i);
+            if (mMesh.status(e).deleted()) continue;
+            const HalfedgeHandle h = mMesh.halfedge_handle(e, 0);
+            const int from = mMesh.from_vertex_handle(h).idx(), to = mMesh.to_vertex_handle(h).idx();
+            ++mValence[from];
+            ++mValence[to];
+            if (euclidean) {
+                const double l2 = (points[to] - points[from]).sqrnorm();
+                if (l2 > hi2) mLong.push_back({length(e), std::sqrt(l2), i});
+                else if (l2 < lo2) mShort.push_back({length(e), std::sqrt(l2), i});
+            } else {
+                const double l = length(e);
+                if (l > mHi) mLong.push_back({l, euclideanLength(e), i});
+                else if (l < mLo) mShort.push_back({l, l, i});
+            }
+        }
+        mValenceValid = true;
+    }
+
+    /// Splits long edges at their midpoints until none is left (or a safety cap). Among the edges
+    /// too long in metric length, the Euclidean-longest goes first: when a triangle's longest side
+    /// is due for a split it is split before the others (Rivara's longest-edge bisection), which
+    /// keeps triangles from degenerating even where the metric jumps.
+    int splitLongEdges()
+    {
+        auto longerFirst = [](const QueuedEdge& x, const QueuedEdge& y) { return x.priority < y.priority; };
+        std::make_heap(mLong.begin(), mLong.end(), longerFirst);
+        // Longest-edge bisection terminates; the cap only guards against a pathological metric.
+        const std::size_t cap = 64 * mMesh.n_edges() + 100000;
+        int splits = 0;
+        while (!mLong.empty() && std::size_t(splits) < cap) {
+            std::pop_heap(mLong.begin(), mLong.end(), longerFirst);
+            const QueuedEdge item = mLong.back();
+            mLong.pop_back();
+            const EdgeHandle e(item.edge);
+            if (mMesh.status(e).deleted() || length(e) != item.length) continue; // stale
+            const HalfedgeHandle h = mMesh.halfedge_handle(e, 0);
+            const Vec3 mid = 0.5 * (position(mMesh, mMesh.from_vertex_handle(h)) +
+                                    position(mMesh, mMesh.to_vertex_handle(h)));
+            if (!splitKeepsFacesValid(h, mid)) continue; // stays long: counted in tooLong
+            const VertexHandle w = split(mMesh, e, mid);
+            if (!w.is_valid()) continue;
+            ++splits;
+            mValenceValid = false;
+            for (auto oh = mMesh.cvoh_begin(w); oh.is_valid(); ++oh) {
+                const EdgeHandle ne = mMesh.edge_handle(*oh);
+                const double l = length(ne);
+                if (l > mHi) {
+                    mLong.push_back({l, euclideanLength(ne), ne.idx()});
+                    std::push_heap(mLong.begin(), mLong.end(), longerFirst);
+                } else if (l < mLo) {
+                    mShort.push_back({l, l, ne.idx()}); // a short median: collapsed in the next stage
+                }
+            }
+        }
+        return splits;
+    }
+
+    /// Collapses short edges, shortest first; records tunnels instead of pinching them.
+    int collapseShortEdges()
+    {
+        auto shorterFirst = [](const QueuedEdge& x, const QueuedEdge& y) { return x.priority > y.priority; };
+        std::make_heap(mShort.begin(), mShort.end(), shorterFirst);
+        int collapses = 0;
+        while (!mShort.empty()) {
+            std::pop_heap(mShort.begin(), mShort.end(), shorterFirst);
+            const QueuedEdge item = mShort.back();
+            mShort.pop_back();
+            const EdgeHandle e(item.edge);
+            if (mMesh.status(e).deleted() || length(e) != item.length) continue; // stale
+            const VertexHandle kept = collapseShortEdge(e);
+            if (!kept.is_valid()) continue;
+            ++collapses;
+            mValenceValid = false;
+            for (auto oh = mMesh.cvoh_begin(kept); oh.is_valid(); ++oh) {
+                const EdgeHandle ne = mMesh.edge_handle(*oh);
+                const double l = length(ne);
+                if (l < mLo) {
+                    mShort.push_back({l, l, ne.idx()});
+                    std::push_heap(mShort.begin(), mShort.end(), shorterFirst);
+                }
+            }
+        }
+        return collapses;
+    }
+
+    /// One sweep of flips over every edge.
+    int flipEdges()
+    {
+        if (!mValenceValid) { // splits or collapses since measure()
+            mValence.assign(mMesh.n_vertices(), 0);
+            for (auto e : mMesh.edges()) {
+                const HalfedgeHandle h = mMesh.halfedge_handle(e, 0);
+                ++mValence[mMesh.from_vertex_handle(h).idx()];
+                ++mValence[mMesh.to_vertex_handle(h).idx()];
+            }
+            mValenceValid = true;
+        }
+        int flips = 0;
+        const int edgeCount = int(mMesh.n_edges());
+        for (int i = 0; i < edgeCount; ++i) {
+            const EdgeHandle e(i);
+            if (mMesh.status(e).deleted()) continue;
+            const HalfedgeHandle h = mMesh.halfedge_handle(e, 0), o = mMesh.halfedge_handle(e, 1);
+            if (!mMesh.face_handle(h).is_valid() || !mMesh.face_handle(o).is_valid()) continue;
+            const VertexHandle u = mMesh.from_vertex_handle(h), v = mMesh.to_vertex_handle(h);
+            const VertexHandle a = mMesh.to_vertex_handle(mMesh.next_halfedge_handle(h));
+            const VertexHandle b = mMesh.to_vertex_handle(mMesh.next_halfedge_handle(o));
+            int& vu = mValence[u.idx()];
+            int& vv = mValence[v.idx()];
+            int& va = mValence[a.idx()];
+            int& vb = mValence[b.idx()];
+            if (vu <= 3 || vv <= 3 || a == b) continue;
+            // Deviation of the four valences from the regular 6, before and after the flip.
+            const int before = squared(vu - 6) + squared(vv - 6) + squared(va - 6) + squared(vb - 6);
+            const int after = squared(vu - 7) + squared(vv - 7) + squared(va - 5) + squared(vb - 5);
+            if (after > before) continue;
+            const Vec3 pu = position(mMesh, u), pv = position(mMesh, v);
+            const Vec3 pa = position(mMesh, a), pb = position(mMesh, b);
+            if (after == before && !violatesDelaunay(pu, pv, pa, pb)) continue;
+            const double newLength = metricLength(mMetric, pa, pb);
+            if (newLength < mLo || newLength > mHi) continue;
+            // Do not fold the surface: the new dihedral may not be sharper than the old one (or ~26 deg).
+            const Vec3 n1 = (pv - pu).cross(pa - pu), n2 = (pu - pv).cross(pb - pv);
+            const double n1n2 = n1.norm() * n2.norm();
+            const double oldCosine = n1n2 > 0 ? n1.dot(n2) / n1n2 : -1.0;
+            if (!detail::isFlipAcceptable(mMesh, e, std::min(oldCosine, kFlipFlatCosine) - 1e-9)) continue;
+            mMesh.flip(e);
+            --vu;
+            --vv;
+            ++va;
+            ++vb;
+            ++flips;
+        }
+        return flips;
+    }
+
+    int longCount() const { return int(mLong.size()); }
+    int shortCount() const { return int(mShort.size()); }
+
+private:
+    /// Collapses e toward its midpoint (or, when the midpoint is refused for geometric reasons,
+    /// into one of its endpoints). Returns the kept vertex, or an invalid handle when refused.
+    VertexHandle collapseShortEdge(EdgeHandle e)
+    {
+        const HalfedgeHandle h = mMesh.halfedge_handle(e, 0);
+        const VertexHandle u = mMesh.from_vertex_handle(h), v = mMesh.to_vertex_handle(h);
+        const VertexHandle w = sharedOutsideNeighbour(mMesh, h);
+        if (w.is_valid()) {
+            recordTunnel(u, v, w);
+            return VertexHandle();
+        }
+        const Vec3 pu = position(mMesh, u), pv = position(mMesh, v);
+        const HalfedgeHandle o = mMesh.opposite_halfedge_handle(h);
+        // (halfedge to collapse, target): the midpoint, then v kept in place, then u kept in place.
+        const std::array<std::pair<HalfedgeHandle, Vec3>, 3> options = {
+            {{h, Vec3(0.5 * (pu + pv))}, {h, pv}, {o, pu}}};
+        for (const auto& [hh, target] : options) {
+            const detail::CollapseObstacles obstacles = detail::collapseObstacles(mMesh, hh, target);
+            // Topological obstacles do not depend on the target: give up at once.
+            if (obstacles & ~detail::kCollapseGeometry) return VertexHandle();
+            if (obstacles) continue;
+            if (!keepsEdgesShortEnough(u, v, target)) continue;
+            return detail::collapseUnchecked(mMesh, hh, target);
+        }
+        return VertexHandle();
+    }
+
+    /// True when splitting h's edge at `mid` (world space) leaves no degenerate face. With a metric
+    /// that jumps across a surface, bisecting the metric-longest edges can shrink a triangle toward a
+    /// needle indefinitely; this stops it before the faces degenerate.
+    bool splitKeepsFacesValid(HalfedgeHandle h, const Vec3& mid) const
+    {
+        const HalfedgeHandle sides[2] = {h, mMesh.opposite_halfedge_handle(h)};
+        for (const HalfedgeHandle s : sides) {
+            const Vec3 pu = position(mMesh, mMesh.from_vertex_handle(s)), pv = position(mMesh, mMesh.to_vertex_handle(s));
+            const Vec3 pa = position(mMesh, mMesh.to_vertex_handle(mMesh.next_halfedge_handle(s)));
+            if (!detail::isFaceAcceptable(Vec3::Zero(), pu, mid, pa) || !detail::isFaceAcceptable(Vec3::Zero(), mid, pv, pa))
+                return false;
+        }
+        return true;
+    }
+
+    /// True when no edge from `target` to a neighbour of u or v would exceed zeta*delta (metric
+    /// length): refusing those collapses avoids split/collapse oscillation.
+    bool keepsEdgesShortEnough(VertexHandle u, VertexHandle v, const Vec3& target) const
+    {
+        const VertexHandle ends[2] = {u, v};
+        for (const VertexHandle end : ends) {
+            for (auto n = mMesh.cvv_begin(end); n.is_valid(); ++n) {
+                if (*n == u || *n == v) continue;
+                if (metricLength(mMetric, target, position(mMesh, *n)) > mHi) return false;
+            }
+        }
+        return true;
+    }
+
+    /// Records the tunnel u-v-w once (whichever of its edges found it).
+    void recordTunnel(VertexHandle u, VertexHandle v, VertexHandle w)
+    {
+        std::array<int, 3> key = {u.idx(), v.idx(), w.idx()};
+        std::sort(key.begin(), key.end());
+        for (const auto& t : mStats.tunnels) {
+            std::array<int, 3> seen = {t.u.idx(), t.v.idx(), t.w.idx()};
+            std::sort(seen.begin(), seen.end());
+            if (seen == key) return;
+        }
+        mStats.tunnels.push_back({u, v, w});
+    }
+
+    /// True when the angles opposite edge u-v (at a and b), measured with G at the edge midpoint,
+    /// sum to more than pi by a margin: flipping to a-b makes the pair Delaunay-like.
+    bool violatesDelaunay(const Vec3& pu, const Vec3& pv, const Vec3& pa, const Vec3& pb) const
+    {
+        Mat3 g;
+        const bool euclidean = mMetric.isEuclidean();
+        if (!euclidean) g = mMetric.at(0.5 * (pu + pv));
+        auto dot = [&](const Vec3& x, const Vec3& y) { return euclidean ? x.dot(y) : x.dot(g * y); };
+        // cot of the angle between x and y: <x,y> / sqrt(|x|^2 |y|^2 - <x,y>^2) (Gram determinant).
+        auto cot = [&](const Vec3& x, const Vec3& y) {
+            const double xy = dot(x, y), gram = dot(x, x) * dot(y, y) - xy * xy;
+            return gram > 0 ? xy / std::sqrt(gram) : 1e300;
+        };
+        return cot(pu - pa, pv - pa) + cot(pu - pb, pv - pb) < -kDelaunayTolerance;
+    }
+
+    Mesh& mMesh;
+    const MetricField& mMetric;
+    RegularityStats& mStats;
+    double mLo; ///< delta (metric length)
+    double mHi; ///< zeta * delta (metric length)
+    std::vector<QueuedEdge> mLong, mShort;
+    std::vector<int> mValence; ///< by vertex idx(), kept up to date during the flip sweep
+    bool mValenceValid = false; ///< mValence matches the mesh (no split or collapse since it was counted)
+};
+
+} // namespace
+
+RegularityStats enforceRegularity(Mesh& mesh, const MetricField& metric, const RegularityOptions& options)
+{
+    RegularityStats stats;
+    Regularizer regularizer(mesh, metric, options, stats);
+    bool counted = false;
+    for (int pass = 0; pass < options.maxPasses; ++pass) {
+        regularizer.measure();
+        const int longBefore = regularizer.longCount(), shortBefore = regularizer.shortCount();
+        int changes = 0;
+        if (longBefore > 0) {
+            const int n = regularizer.splitLongEdges();
+            stats.splits += n;
+            changes += n;
+        }
+        if (regularizer.shortCount() > 0) { // includes short medians queued by the splits
+            const int n = regularizer.collapseShortEdges();
+            stats.collapses += n;
+            changes += n;
+        }
+        if (options.flips) {
+            const int n = regularizer.flipEdges();
+            stats.flips += n;
+            changes += n;
+        }
+        if (changes == 0) {
+            // Nothing moved since the measurement: its counts are the final ones.
+            stats.tooLong = longBefore;
+            stats.tooShort = shortBefore;
+            counted = true;
+            break;
+        }
+    }
+    if (!counted) {
+        regularizer.measure();
+        stats.tooLong = regularizer.longCount();
+        stats.tooShort = regularizer.shortCount();
+    }
+    return stats;
+}
+
+} // namespace riemesh

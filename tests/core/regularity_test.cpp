@@ -1,0 +1,284 @@
+// Regularity: after enforceRegularity every edge's metric length is within [delta, zeta*delta]
+// (up to the few edges the guards refuse, which are counted), the mesh stays valid, and the
+// sampling density follows the metric.
+#include "mesh_invariants.h"
+#include "riemesh/primitives.h"
+#include "riemesh/regularity.h"
+
+#include <doctest/doctest.h>
+
+#include <algorithm>
+#include <array>
+#include <chrono>
+#include <cmath>
+#include <vector>
+
+using namespace riemesh;
+
+namespace {
+
+/// Edges outside [delta, zeta*delta] in metric length, recounted independently of the stats.
+struct OutOfRange {
+    int tooShort = 0;
+    int tooLong = 0;
+    int edges = 0;
+};
+
+OutOfRange countOutOfRange(const Mesh& mesh, const MetricField& metric, const RegularityOptions& options)
+{
+    OutOfRange count;
+    for (auto e : mesh.edges()) {
+        const double l = metricLength(metric, mesh, e);
+        ++count.edges;
+        if (l < options.delta) ++count.tooShort;
+        if (l > options.zeta * options.delta) ++count.tooLong;
+    }
+    return count;
+}
+
+/// Checks the result of a regularity call: valid mesh, same Euler characteristic, stats that match
+/// a recount, and fewer than 1% of the edges left out of range.
+void checkRegular(const Mesh& mesh, const MetricField& metric, const RegularityOptions& options,
+                  const RegularityStats& stats, int euler)
+{
+    CHECK_MESH_OK(mesh);
+    CHECK(topologyOf(mesh).euler == euler);
+    const OutOfRange count = countOutOfRange(mesh, metric, options);
+    CHECK(count.tooShort == stats.tooShort);
+    CHECK(count.tooLong == stats.tooLong);
+    CHECK(stats.tooLong == 0);
+    CHECK(double(stats.tooShort + stats.tooLong) < 0.01 * count.edges);
+}
+
+std::vector<Vec3> positions(const Mesh& mesh)
+{
+    std::vector<Vec3> p;
+    for (auto v : mesh.vertices()) p.push_back(position(mesh, v));
+    return p;
+}
+
+} // namespace
+
+TEST_CASE("regularity: every edge ends within [delta, zeta*delta]")
+{
+    // Icosphere edges are ~5.5 world units; delta = 0.5 needs three to four halvings.
+    Mesh mesh = makeIcosphere(Vec3::Zero(), 10.0, 1);
+    const EuclideanMetric metric;
+    RegularityOptions options;
+    options.delta = 0.5;
+    options.maxPasses = 8;
+    const auto stats = enforceRegularity(mesh, metric, options);
+    CHECK(stats.splits > 1000);
+    CHECK(stats.tunnels.empty());
+    checkRegular(mesh, metric, options, stats, 2);
+    CHECK(topologyOf(mesh).vertices > 1000u);
+    // Splits at edge midpoints stay on the original flat faces: the volume is that of the icosphere.
+    CHECK(signedVolume(mesh) == doctest::Approx(signedVolume(makeIcosphere(Vec3::Zero(), 10.0, 1))).epsilon(0.01));
+}
+
+TEST_CASE("regularity: a fine icosphere with a large delta coarsens")
+{
+    Mesh mesh = makeIcosphere(Vec3::Zero(), 10.0, 5); // edges ~0.3 world units, 10242 vertices
+    const EuclideanMetric metric;
+    RegularityOptions options;
+    options.delta = 1.0;
+    options.maxPasses = 8;
+    const auto before = topologyOf(mesh);
+    const auto stats = enforceRegularity(mesh, metric, options);
+    CHECK(stats.collapses > 5000);
+    CHECK(stats.splits == 0);
+    checkRegular(mesh, metric, options, stats, 2);
+    CHECK(topologyOf(mesh).vertices * 5 < before.vertices);
+    CHECK(signedVolume(mesh) == doctest::Approx(4.0 / 3.0 * M_PI * 1000.0).epsilon(0.05));
+}
+
+TEST_CASE("regularity: a torus refines and coarsens without changing its genus")
+{
+    const EuclideanMetric metric;
+    RegularityOptions options;
+    options.maxPasses = 8;
+    SUBCASE("refine")
+    {
+        Mesh mesh = makeTorus(Vec3::Zero(), 6.0, 2.0, 12, 6);
+        options.delta = 0.4;
+        const auto stats = enforceRegularity(mesh, metric, options);
+        CHECK(stats.splits > 0);
+        checkRegular(mesh, metric, options, stats, 0);
+        CHECK(topologyOf(mesh).genus == 1);
+        CHECK(stats.tunnels.empty());
+    }
+    SUBCASE("coarsen")
+    {
+        Mesh mesh = makeTorus(Vec3::Zero(), 6.0, 2.0, 120, 40);
+        options.delta = 1.0;
+        const auto stats = enforceRegularity(mesh, metric, options);
+        CHECK(stats.collapses > 0);
+        checkRegular(mesh, metric, options, stats, 0);
+        CHECK(topologyOf(mesh).genus == 1);
+        CHECK(stats.tunnels.empty());
+    }
+}
+
+TEST_CASE("regularity: a box with sharp creases refines and stays valid")
+{
+    Mesh mesh = makeBox(Vec3(0, 0, 0), Vec3(4, 3, 2), 1.0);
+    const EuclideanMetric metric;
+    RegularityOptions options;
+    options.delta = 0.25;
+    options.maxPasses = 8;
+    const auto stats = enforceRegularity(mesh, metric, options);
+    CHECK(stats.splits > 0);
+    checkRegular(mesh, metric, options, stats, 2);
+    CHECK(signedVolume(mesh) == doctest::Approx(24.0).epsilon(0.05));
+}
+
+TEST_CASE("regularity: an already regular mesh is left untouched")
+{
+    Mesh mesh = makeIcosphere(Vec3::Zero(), 10.0, 2);
+    const EuclideanMetric metric;
+    RegularityOptions options;
+    options.delta = 0.5;
+    options.maxPasses = 16;
+    enforceRegularity(mesh, metric, options);
+    const auto before = positions(mesh);
+    const auto topologyBefore = topologyOf(mesh);
+    const auto stats = enforceRegularity(mesh, metric, options);
+    CHECK(stats.splits == 0);
+    CHECK(stats.collapses == 0);
+    CHECK(stats.flips == 0);
+    CHECK(stats.tooLong == 0);
+    const auto after = positions(mesh);
+    REQUIRE(after.size() == before.size());
+    for (std::size_t i = 0; i < after.size(); ++i) CHECK((after[i] - before[i]).norm() == 0.0);
+    CHECK(topologyOf(mesh).edges == topologyBefore.edges);
+}
+
+TEST_CASE("regularity: where the metric doubles lengths the sampling gets twice as dense")
+{
+    // G = 4 I for x > 0 doubles metric lengths there: edges come out half as long in world units,
+    // so that half holds about 4 times as many vertices as the other (same area).
+    const FunctionMetric metric(
+        [](const Vec3& x) { return x.x() > 0 ? Mat3(4.0 * Mat3::Identity()) : Mat3(Mat3::Identity()); }, 4.0);
+    Mesh mesh = makeIcosphere(Vec3::Zero(), 10.0, 2);
+    RegularityOptions options;
+    options.delta = 0.8;
+    options.maxPasses = 12;
+    const auto stats = enforceRegularity(mesh, metric, options);
+    checkRegular(mesh, metric, options, stats, 2);
+    int positive = 0, negative = 0; // away from the jump at x = 0, where the halves mix
+    for (auto v : mesh.vertices()) {
+        const double x = mesh.point(v)[0];
+        if (x > 1.0) ++positive;
+        else if (x < -1.0) ++negative;
+    }
+    REQUIRE(negative > 0);
+    const double ratio = double(positive) / negative;
+    MESSAGE("vertices x > 1: " << positive << ", x < -1: " << negative << ", ratio " << ratio);
+    CHECK(ratio > 2.5);
+    CHECK(ratio < 6.0);
+}
+
+TEST_CASE("regularity: an anisotropic metric diag(1,1,4) makes edges shorter along z")
+{
+    Mat3 g = Mat3::Identity();
+    g(2, 2) = 4.0; // lengths along z count double
+    const ConstantMetric metric(g);
+    Mesh mesh = makeIcosphere(Vec3::Zero(), 10.0, 2);
+    RegularityOptions options;
+    options.delta = 0.8;
+    options.maxPasses = 12;
+    const auto stats = enforceRegularity(mesh, metric, options);
+    checkRegular(mesh, metric, options, stats, 2);
+    // World-space lengths of the edges that run mostly along z and of those mostly across it.
+    double alongZ = 0, acrossZ = 0;
+    int nAlong = 0, nAcross = 0;
+    Vec3 meanAbs = Vec3::Zero();
+    int n = 0;
+    for (auto e : mesh.edges()) {
+        const auto h = mesh.halfedge_handle(e, 0);
+        const Vec3 d = position(mesh, mesh.to_vertex_handle(h)) - position(mesh, mesh.from_vertex_handle(h));
+        const double c = std::abs(d.z()) / d.norm();
+        if (c > 0.8) { alongZ += d.norm(); ++nAlong; }
+        else if (c < 0.2) { acrossZ += d.norm(); ++nAcross; }
+        meanAbs += d.cwiseAbs();
+        ++n;
+    }
+    REQUIRE(nAlong > 50);
+    REQUIRE(nAcross > 50);
+    meanAbs /= n;
+    const double ratio = (alongZ / nAlong) / (acrossZ / nAcross);
+    MESSAGE("mean length along z / across z: " << ratio << "; mean |dx| |dy| |dz|: " << meanAbs.transpose());
+    CHECK(ratio > 0.35);
+    CHECK(ratio < 0.75);
+    CHECK(meanAbs.z() < 0.8 * meanAbs.x());
+    CHECK(meanAbs.z() < 0.8 * meanAbs.y());
+    CHECK(meanAbs.x() == doctest::Approx(meanAbs.y()).epsilon(0.15));
+}
+
+TEST_CASE("regularity: short edges across a thin tunnel are reported once each, not collapsed")
+{
+    // A tube of 3 segments, radius 0.3: the ring edges (~0.52) are shorter than delta = 1, and
+    // each ring is a triangle loop that bounds no face.
+    const int major = 12, minor = 3;
+    Mesh mesh = makeTorus(Vec3::Zero(), 4.0, 0.3, major, minor);
+    const EuclideanMetric metric;
+    RegularityOptions options;
+    options.delta = 1.0;
+    options.maxPasses = 4;
+    const auto before = topologyOf(mesh);
+    const auto stats = enforceRegularity(mesh, metric, options);
+    CHECK_MESH_OK(mesh);
+    CHECK(stats.collapses == 0);
+    CHECK(topologyOf(mesh).vertices == before.vertices);
+    CHECK(topologyOf(mesh).genus == 1);
+    CHECK(stats.tooShort == major * minor);
+    REQUIRE(stats.tunnels.size() == std::size_t(major));
+    std::vector<int> ringsSeen;
+    for (const auto& t : stats.tunnels) {
+        // Vertex (i, j) of the torus has index i * minor + j: a tunnel is one ring i.
+        const int ring = t.u.idx() / minor;
+        CHECK(t.v.idx() / minor == ring);
+        CHECK(t.w.idx() / minor == ring);
+        CHECK(t.u != t.v);
+        CHECK(t.v != t.w);
+        CHECK(t.u != t.w);
+        ringsSeen.push_back(ring);
+    }
+    std::sort(ringsSeen.begin(), ringsSeen.end());
+    CHECK(std::unique(ringsSeen.begin(), ringsSeen.end()) == ringsSeen.end());
+}
+
+TEST_CASE("regularity: one call on an already regular 5k-vertex mesh takes well under a millisecond")
+{
+    // Refine an icosphere to ~5,000 vertices, then time calls that find nothing to do.
+    Mesh mesh = makeIcosphere(Vec3::Zero(), 10.0, 3);
+    RegularityOptions options;
+    options.delta = 0.32;
+    options.maxPasses = 16;
+    const EuclideanMetric euclidean;
+    enforceRegularity(mesh, euclidean, options);
+    const auto vertices = topologyOf(mesh).vertices;
+    CHECK(vertices > 4500u);
+    CHECK(vertices < 5500u);
+    const FunctionMetric function([](const Vec3&) { return Mat3(Mat3::Identity()); }, 1.0);
+    auto medianMilliseconds = [&](const MetricField& metric) {
+        std::vector<double> times;
+        for (int k = 0; k < 21; ++k) {
+            const auto t0 = std::chrono::steady_clock::now();
+            const auto stats = enforceRegularity(mesh, metric, options);
+            const auto t1 = std::chrono::steady_clock::now();
+            CHECK(stats.splits + stats.collapses + stats.flips == 0);
+            times.push_back(std::chrono::duration<double, std::milli>(t1 - t0).count());
+        }
+        std::nth_element(times.begin(), times.begin() + 10, times.end());
+        return times[10];
+    };
+    const double euclideanMs = medianMilliseconds(euclidean);
+    const double functionMs = medianMilliseconds(function);
+    MESSAGE(vertices << " vertices: Euclidean " << euclideanMs << " ms, FunctionMetric " << functionMs << " ms");
+#ifdef NDEBUG
+    // Loose bounds (the machine may be busy): they catch a quadratic or allocating hot loop.
+    CHECK(euclideanMs < 5.0);
+    CHECK(functionMs < 10.0);
+#endif
+}
