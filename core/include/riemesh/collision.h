@@ -16,13 +16,28 @@ struct CollisionOptions {
     double delta = 1.0; ///< shortest edge (metric length, world units)
     double zeta = 2.5;  ///< longest/shortest edge ratio
     double vmax = 0.5;  ///< largest displacement per iteration (world units)
+    /// kappa: a pair (u, w) is on the same local sheet, hence no collision, when w is reachable
+    /// from u by an edge path whose Euclidean length is <= kappa * collisionRadius (world units,
+    /// radius taken numerically). 2 keeps the 2- and 3-rings of regular meshes and sharply curved
+    /// sheets (geodesic <= pi/2 chord, times the zig-zag of mesh paths) out of the results.
+    double neighbourhoodFactor = 2.0;
 };
+
+/// The search radius lambda * zeta * delta (metric length, world units), lambda_E when
+/// metric.isEuclidean() and lambda_R otherwise.
+double collisionRadius(const MetricField& metric, const CollisionOptions& options);
 
 /// lambda_E = sqrt(1 - 1/zeta + 1/zeta^2) + vmax/(2 zeta delta) (Euclidean, eq. 4) or
 /// lambda_R = 1 + vmax/(2 zeta delta) (Riemannian).
 double collisionLambda(bool euclidean, double zeta, double delta, double vmax);
 
-/// Colliding vertex pairs (each pair once, closest first).
+/// Colliding vertex pairs (each pair once, closest first; distance = metric length, world units).
+/// A pair is reported when d_R(u, w) <= collisionRadius and w is not within u's mesh
+/// neighbourhood (see neighbourhoodFactor). Pairs whose vertex normals agree (n_u . n_w > 0.5)
+/// and that lie nearly in each other's tangent planes are same-sheet pairs and skipped without a
+/// search. Pairs of vertices tagged with the same cut id (the two sides of a tunnel cut, see
+/// kCutIdProperty in topology.h) are never reported, so a fresh cut is not merged back at once.
+/// Deleted vertices are ignored.
 std::vector<CollisionPair> findCollisions(const Mesh& mesh, const MetricField& metric,
                                           const CollisionOptions& options = {});
 

@@ -27,12 +27,30 @@ struct TunnelCandidate {
     VertexHandle u, v, w;
 };
 
+/// Name of an optional per-vertex int property: cutTunnel tags the vertices of both caps and the
+/// two rings around them with one fresh id (> 0); findCollisions never pairs two vertices with the
+/// same id, so the two sides of a cut are not merged back while they separate. 0 = untagged.
+inline constexpr const char* kCutIdProperty = "riemesh:cut_id";
+
+/// True when merge(u, w) can run: both alive and distinct, not adjacent, closed one-rings
+/// disjoint, valence >= 3 each, and no edge already joins a neighbour of u to a neighbour of w.
 bool canMerge(const Mesh& mesh, VertexHandle u, VertexHandle w);
-/// Fig. 3a. Returns false (mesh untouched) when canMerge is false.
+/// Fig. 3a. Returns false (mesh untouched) when canMerge is false. Orientation is forced by the
+/// boundary halfedges of the two loops; the band starts at the closest pair of loop vertices and
+/// zips greedily along the shorter diagonal. No vertex is moved.
 bool merge(Mesh& mesh, VertexHandle u, VertexHandle w);
 
+/// True when cutTunnel(u, v, w) can run: the three edges exist, (u, v, w) is not a face, and the
+/// faces around u, v, w split into two sides (left of u->v->w and right of it) that the loop
+/// separates, each loop vertex keeping >= 2 faces on each side. Refused as well: a side that closes
+/// up with its cap alone (a pinched valence-3 vertex, not a tunnel), and a vertex off the loop
+/// whose faces around the loop are not one contiguous arc of its fan.
 bool canCutTunnel(const Mesh& mesh, VertexHandle u, VertexHandle v, VertexHandle w);
-/// Fig. 3b. Returns false (mesh untouched) when canCutTunnel is false.
+/// Fig. 3b. Returns false (mesh untouched) when canCutTunnel is false. The left side keeps u, v, w;
+/// the right side gets copies (velocity and every other non-built-in vertex property copied).
+/// Each loop vertex and each copy then moves a quarter of the way toward the centroid of its own
+/// side's other neighbours, so the two caps are apart. Both caps and the two rings around them get
+/// a fresh kCutIdProperty id.
 bool cutTunnel(Mesh& mesh, VertexHandle u, VertexHandle v, VertexHandle w);
 
 struct TopologyStats {
@@ -41,9 +59,20 @@ struct TopologyStats {
     int rejected = 0; ///< candidates skipped (already consumed by another edit, or unsafe)
 };
 
+struct TopologyOptions {
+    /// A merge candidate is skipped when, after the earlier edits of the same call, w has become
+    /// reachable from u by an edge path at most this long (world units): the earlier merge already
+    /// joined that region. <= 0: 3 x the mean length of the edges around u and w (roughly
+    /// kappa * collision radius for a regular mesh). Pass neighbourhoodFactor * collisionRadius
+    /// for the exact value used by findCollisions.
+    double neighbourhoodRadius = 0.0;
+};
+
 /// Applies cuts for the tunnel candidates, then merges for the collision pairs (closest first),
-/// skipping candidates whose vertices an earlier edit of this call removed or touched.
+/// skipping candidates whose vertices an earlier edit of this call removed or touched (changed
+/// one-ring), and merge candidates that an earlier merge made mesh neighbours (see
+/// TopologyOptions). Never calls garbage_collection().
 TopologyStats resolveTopology(Mesh& mesh, const std::vector<CollisionPair>& collisions,
-                              const std::vector<TunnelCandidate>& tunnels);
+                              const std::vector<TunnelCandidate>& tunnels, const TopologyOptions& options = {});
 
 } // namespace riemesh
