@@ -132,6 +132,11 @@ bool isFlipAcceptable(const Mesh& mesh, EdgeHandle e, double minNewDihedralCosin
     return true;
 }
 
+void flipUnchecked(Mesh& mesh, EdgeHandle e)
+{
+    mesh.flip(e);
+}
+
 } // namespace detail
 
 bool canSplit(const Mesh& mesh, EdgeHandle e)
@@ -190,7 +195,7 @@ bool canFlip(const Mesh& mesh, EdgeHandle e)
 void flip(Mesh& mesh, EdgeHandle e)
 {
     if (!canFlip(mesh, e)) return;
-    mesh.flip(e);
+    detail::flipUnchecked(mesh, e);
 }
 
 } // namespace riemesh

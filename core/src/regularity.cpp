@@ -4,7 +4,12 @@
 // edges are queued as they appear), collapse the short ones (shortest first, toward the midpoint; the
 // endpoints are tried when the midpoint is refused), then one sweep of flips that lower the valence
 // deviation from 6 (or, at equal deviation, restore the Delaunay-like angle condition measured in
-// the metric). Passes repeat until one changes nothing or maxPasses is reached. On a mesh that is
+// the metric). Passes repeat until one changes nothing or maxPasses is reached.
+//
+// A short edge u-v whose endpoints share an outside neighbour w is not collapsed (it would pinch
+// the loop u-v-w). If one side of that loop holds only a few vertices (a dent or pimple of the
+// sampling, typically a valence-3 vertex) those are collapsed away and u-v collapses normally;
+// otherwise the loop is a real tunnel and goes to RegularityStats::tunnels for the topology step. On a mesh that is
 // already regular one call costs one length evaluation and one flip test per edge, with no
 // per-edge allocation.
 #include "riemesh/regularity.h"
@@ -17,6 +22,7 @@
 #include <array>
 #include <cmath>
 #include <cstdint>
+#include <stdexcept>
 
 namespace riemesh {
 
@@ -38,6 +44,12 @@ constexpr double kDelaunayTolerance = 1e-2;
 constexpr double kFlipFlatCosine = 0.9;
 
 int squared(int x) { return x * x; }
+
+/// A loop u-v-w that cuts off at most this many vertices is a cap (a dent or a pimple of the
+/// sampling), dissolved by collapses; a loop with more on both sides is a tunnel.
+constexpr int kMaxCapVertices = 8;
+
+bool shorterFirst(const QueuedEdge& x, const QueuedEdge& y) { return x.priority > y.priority; }
 
 class Regularizer {
 public:
@@ -137,29 +149,17 @@ public:
     /// Collapses short edges, shortest first; records tunnels instead of pinching them.
     int collapseShortEdges()
     {
-        auto shorterFirst = [](const QueuedEdge& x, const QueuedEdge& y) { return x.priority > y.priority; };
         std::make_heap(mShort.begin(), mShort.end(), shorterFirst);
-        int collapses = 0;
+        mCollapses = 0;
         while (!mShort.empty()) {
             std::pop_heap(mShort.begin(), mShort.end(), shorterFirst);
             const QueuedEdge item = mShort.back();
             mShort.pop_back();
             const EdgeHandle e(item.edge);
             if (mMesh.status(e).deleted() || length(e) != item.length) continue; // stale
-            const VertexHandle kept = collapseShortEdge(e);
-            if (!kept.is_valid()) continue;
-            ++collapses;
-            mValenceValid = false;
-            for (auto oh = mMesh.cvoh_begin(kept); oh.is_valid(); ++oh) {
-                const EdgeHandle ne = mMesh.edge_handle(*oh);
-                const double l = length(ne);
-                if (l < mLo) {
-                    mShort.push_back({l, l, ne.idx()});
-                    std::push_heap(mShort.begin(), mShort.end(), shorterFirst);
-                }
-            }
+            collapseShortEdge(e);
         }
-        return collapses;
+        return mCollapses;
     }
 
     /// One sweep of flips over every edge.
@@ -203,7 +203,7 @@ public:
             const double n1n2 = n1.norm() * n2.norm();
             const double oldCosine = n1n2 > 0 ? n1.dot(n2) / n1n2 : -1.0;
             if (!detail::isFlipAcceptable(mMesh, e, std::min(oldCosine, kFlipFlatCosine) - 1e-9)) continue;
-            mMesh.flip(e);
+            detail::flipUnchecked(mMesh, e);
             --vu;
             --vv;
             ++va;
@@ -213,20 +213,52 @@ public:
         return flips;
     }
 
+    /// Drops the tunnel candidates that later edits of this call undid: a vertex was removed, the
+    /// edge u-v or the loop through w is gone, or u-v is no longer shorter than delta.
+    void pruneTunnels()
+    {
+        auto& tunnels = mStats.tunnels;
+        tunnels.erase(std::remove_if(tunnels.begin(), tunnels.end(),
+                                     [&](const TunnelCandidate& t) {
+                                         if (mMesh.status(t.u).deleted() || mMesh.status(t.v).deleted() ||
+                                             mMesh.status(t.w).deleted())
+                                             return true;
+                                         const HalfedgeHandle h = mMesh.find_halfedge(t.u, t.v);
+                                         if (!h.is_valid() || !mMesh.find_halfedge(t.u, t.w).is_valid() ||
+                                             !mMesh.find_halfedge(t.v, t.w).is_valid())
+                                             return true;
+                                         // w must still lie outside the two faces of u-v.
+                                         const HalfedgeHandle o = mMesh.opposite_halfedge_handle(h);
+                                         if (mMesh.to_vertex_handle(mMesh.next_halfedge_handle(h)) == t.w ||
+                                             mMesh.to_vertex_handle(mMesh.next_halfedge_handle(o)) == t.w)
+                                             return true;
+                                         return !(length(mMesh.edge_handle(h)) < mLo);
+                                     }),
+                      tunnels.end());
+    }
+
     int longCount() const { return int(mLong.size()); }
     int shortCount() const { return int(mShort.size()); }
 
 private:
     /// Collapses e toward its midpoint (or, when the midpoint is refused for geometric reasons,
-    /// into one of its endpoints). Returns the kept vertex, or an invalid handle when refused.
-    VertexHandle collapseShortEdge(EdgeHandle e)
+    /// into one of its endpoints). When its endpoints share an outside neighbour w, the loop u-v-w
+    /// either cuts off a small cap (a few vertices, e.g. a valence-3 dent) that is dissolved first,
+    /// or it is a real tunnel, recorded for the topology step.
+    void collapseShortEdge(EdgeHandle e)
     {
-        const HalfedgeHandle h = mMesh.halfedge_handle(e, 0);
+        HalfedgeHandle h = mMesh.halfedge_handle(e, 0);
         const VertexHandle u = mMesh.from_vertex_handle(h), v = mMesh.to_vertex_handle(h);
-        const VertexHandle w = sharedOutsideNeighbour(mMesh, h);
-        if (w.is_valid()) {
-            recordTunnel(u, v, w);
-            return VertexHandle();
+        for (int attempt = 0;; ++attempt) {
+            const VertexHandle w = sharedOutsideNeighbour(mMesh, h);
+            if (!w.is_valid()) break;
+            const CapResult cap = dissolveSmallCap(h, w);
+            if (cap == CapResult::NotACap) recordTunnel(u, v, w);
+            if (cap != CapResult::Dissolved || attempt == 2) return;
+            // The cap's collapses may have replaced the edge u-v by a merged twin: find it again.
+            h = mMesh.find_halfedge(u, v);
+            if (!h.is_valid()) return;
+            if (!(length(mMesh.edge_handle(h)) < mLo)) return;
         }
         const Vec3 pu = position(mMesh, u), pv = position(mMesh, v);
         const HalfedgeHandle o = mMesh.opposite_halfedge_handle(h);
@@ -236,12 +268,75 @@ private:
         for (const auto& [hh, target] : options) {
             const detail::CollapseObstacles obstacles = detail::collapseObstacles(mMesh, hh, target);
             // Topological obstacles do not depend on the target: give up at once.
-            if (obstacles & ~detail::kCollapseGeometry) return VertexHandle();
+            if (obstacles & ~detail::kCollapseGeometry) return;
             if (obstacles) continue;
             if (!keepsEdgesShortEnough(u, v, target)) continue;
-            return detail::collapseUnchecked(mMesh, hh, target);
+            collapseAndRequeue(hh, target);
+            return;
         }
-        return VertexHandle();
+    }
+
+    /// Collapses hh into `target` (guards already checked) and queues the short edges it made.
+    void collapseAndRequeue(HalfedgeHandle hh, const Vec3& target)
+    {
+        const VertexHandle kept = detail::collapseUnchecked(mMesh, hh, target);
+        ++mCollapses;
+        mValenceValid = false;
+        for (auto oh = mMesh.cvoh_begin(kept); oh.is_valid(); ++oh) {
+            const EdgeHandle ne = mMesh.edge_handle(*oh);
+            const double l = length(ne);
+            if (l < mLo) {
+                mShort.push_back({l, l, ne.idx()});
+                std::push_heap(mShort.begin(), mShort.end(), shorterFirst);
+            }
+        }
+    }
+
+    enum class CapResult { NotACap, Dissolved, Stuck };
+
+    /// The loop u-v-w (u-v = h's edge, w a shared outside neighbour) bounds no face. If one side of
+    /// it holds at most kMaxCapVertices vertices it is a small cap, not a tunnel: its vertices are
+    /// collapsed one by one into their neighbours (kept in place) until the loop bounds a face.
+    CapResult dissolveSmallCap(HalfedgeHandle h, VertexHandle w)
+    {
+        const VertexHandle u = mMesh.from_vertex_handle(h), v = mMesh.to_vertex_handle(h);
+        const VertexHandle a = mMesh.to_vertex_handle(mMesh.next_halfedge_handle(h));
+        const VertexHandle b = mMesh.to_vertex_handle(mMesh.next_halfedge_handle(mMesh.opposite_halfedge_handle(h)));
+        if (!collectCap(a, u, v, w) && !collectCap(b, u, v, w)) return CapResult::NotACap;
+        while (!mCap.empty()) {
+            bool progress = false;
+            for (std::size_t i = 0; i < mCap.size() && !progress; ++i) {
+                const VertexHandle x = mCap[i];
+                for (auto oh = mMesh.cvoh_begin(x); oh.is_valid(); ++oh) {
+                    const Vec3 target = position(mMesh, mMesh.to_vertex_handle(*oh)); // the neighbour stays
+                    if (detail::collapseObstacles(mMesh, *oh, target) != 0) continue;
+                    if (!keepsEdgesShortEnough(x, mMesh.to_vertex_handle(*oh), target)) continue;
+                    collapseAndRequeue(*oh, target);
+                    mCap.erase(mCap.begin() + std::ptrdiff_t(i));
+                    progress = true;
+                    break;
+                }
+            }
+            if (!progress) return CapResult::Stuck;
+        }
+        return CapResult::Dissolved;
+    }
+
+    /// Collects into mCap the vertices reachable from `seed` without crossing u, v or w. Returns
+    /// false (a large side: a tunnel or a real separation) once more than kMaxCapVertices are found.
+    bool collectCap(VertexHandle seed, VertexHandle u, VertexHandle v, VertexHandle w)
+    {
+        mCap.clear();
+        mCap.push_back(seed);
+        for (std::size_t i = 0; i < mCap.size(); ++i) {
+            for (auto n = mMesh.cvv_begin(mCap[i]); n.is_valid(); ++n) {
+                const VertexHandle y = *n;
+                if (y == u || y == v || y == w || std::find(mCap.begin(), mCap.end(), y) != mCap.end()) continue;
+                if (mCap.size() == std::size_t(kMaxCapVertices)) return false;
+                mCap.push_back(y);
+            }
+        }
+        return true;
     }
 
     /// True when splitting h's edge at `mid` (world space) leaves no degenerate face. With a metric
@@ -310,12 +405,16 @@ private:
     std::vector<QueuedEdge> mLong, mShort;
     std::vector<int> mValence; ///< by vertex idx(), kept up to date during the flip sweep
     bool mValenceValid = false; ///< mValence matches the mesh (no split or collapse since it was counted)
+    int mCollapses = 0;             ///< collapses of the current collapse stage
+    std::vector<VertexHandle> mCap; ///< the vertices of a small cap being dissolved
 };
 
 } // namespace
 
 RegularityStats enforceRegularity(Mesh& mesh, const MetricField& metric, const RegularityOptions& options)
 {
+    if (!(options.delta > 0.0)) throw std::invalid_argument("enforceRegularity: delta must be > 0");
+    if (!(options.zeta > 1.0)) throw std::invalid_argument("enforceRegularity: zeta must be > 1");
     RegularityStats stats;
     Regularizer regularizer(mesh, metric, options, stats);
     bool counted = false;
@@ -351,6 +450,7 @@ RegularityStats enforceRegularity(Mesh& mesh, const MetricField& metric, const R
         stats.tooLong = regularizer.longCount();
         stats.tooShort = regularizer.shortCount();
     }
+    regularizer.pruneTunnels();
     return stats;
 }
 

@@ -2,6 +2,7 @@
 // (up to the few edges the guards refuse, which are counted), the mesh stays valid, and the
 // sampling density follows the metric.
 #include "mesh_invariants.h"
+#include "riemesh/edge_ops.h"
 #include "riemesh/primitives.h"
 #include "riemesh/regularity.h"
 
@@ -11,6 +12,7 @@
 #include <array>
 #include <chrono>
 #include <cmath>
+#include <stdexcept>
 #include <vector>
 
 using namespace riemesh;
@@ -90,6 +92,28 @@ TEST_CASE("regularity: a fine icosphere with a large delta coarsens")
     checkRegular(mesh, metric, options, stats, 2);
     CHECK(topologyOf(mesh).vertices * 5 < before.vertices);
     CHECK(signedVolume(mesh) == doctest::Approx(4.0 / 3.0 * M_PI * 1000.0).epsilon(0.05));
+    // No compaction inside: removed vertices are only marked deleted, so handles stay valid.
+    CHECK(mesh.n_vertices() == before.vertices);
+    // A second call over the deleted elements, then one after compaction, find nothing to do.
+    const auto again = enforceRegularity(mesh, metric, options);
+    CHECK(again.splits + again.collapses + again.flips == 0);
+    mesh.garbage_collection();
+    CHECK_MESH_OK(mesh);
+    const auto compacted = enforceRegularity(mesh, metric, options);
+    CHECK(compacted.splits + compacted.collapses + compacted.flips == 0);
+    CHECK(compacted.tooShort == stats.tooShort);
+}
+
+TEST_CASE("regularity: a non-positive delta or a zeta <= 1 is rejected")
+{
+    Mesh mesh = makeIcosphere(Vec3::Zero(), 1.0, 1);
+    const EuclideanMetric metric;
+    RegularityOptions options;
+    options.delta = 0.0;
+    CHECK_THROWS_AS(enforceRegularity(mesh, metric, options), std::invalid_argument);
+    options.delta = 0.1;
+    options.zeta = 1.0;
+    CHECK_THROWS_AS(enforceRegularity(mesh, metric, options), std::invalid_argument);
 }
 
 TEST_CASE("regularity: a torus refines and coarsens without changing its genus")
@@ -246,6 +270,33 @@ TEST_CASE("regularity: short edges across a thin tunnel are reported once each, 
     }
     std::sort(ringsSeen.begin(), ringsSeen.end());
     CHECK(std::unique(ringsSeen.begin(), ringsSeen.end()) == ringsSeen.end());
+}
+
+TEST_CASE("regularity: a short edge around a valence-3 dent is collapsed, not reported as a tunnel")
+{
+    // A vertex x inserted in face (u, v, w) makes u-v-w a loop that bounds no face, but it cuts
+    // off only x: a dent of the sampling, not a tunnel.
+    Mesh mesh = makeIcosphere(Vec3::Zero(), 10.0, 2); // edges ~2.5-3.2 world units
+    const EuclideanMetric metric;
+    RegularityOptions options;
+    options.delta = 1.5;
+    options.maxPasses = 8;
+    const FaceHandle f = *mesh.faces().begin();
+    const auto h = mesh.halfedge_handle(f);
+    const VertexHandle u = mesh.from_vertex_handle(h), v = mesh.to_vertex_handle(h);
+    const VertexHandle w = mesh.to_vertex_handle(mesh.next_halfedge_handle(h));
+    const Vec3 centroid = (position(mesh, u) + position(mesh, v) + position(mesh, w)) / 3.0;
+    const VertexHandle x = mesh.split(f, toPoint(0.98 * centroid)); // fixture: a slight dent
+    // Pull v toward u: the edge u-v gets shorter than delta.
+    mesh.set_point(v, toPoint(position(mesh, u) + 1.0 * (position(mesh, v) - position(mesh, u)).normalized()));
+    REQUIRE_MESH_OK(mesh);
+    REQUIRE(mesh.valence(x) == 3u);
+    REQUIRE(sharedOutsideNeighbour(mesh, mesh.find_halfedge(u, v)) == w);
+    const auto stats = enforceRegularity(mesh, metric, options);
+    CHECK(stats.tunnels.empty());
+    CHECK(stats.collapses >= 2);
+    CHECK(mesh.status(x).deleted());
+    checkRegular(mesh, metric, options, stats, 2);
 }
 
 TEST_CASE("regularity: one call on an already regular 5k-vertex mesh takes well under a millisecond")

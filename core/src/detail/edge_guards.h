@@ -35,6 +35,9 @@ CollapseObstacles collapseObstacles(const Mesh& mesh, HalfedgeHandle h, const Ve
 /// collapse() without the guard: the caller has checked collapseObstacles(...) == 0.
 VertexHandle collapseUnchecked(Mesh& mesh, HalfedgeHandle h, const Vec3& target);
 
+/// flip() without the guard: the caller has checked isFlipAcceptable(...).
+void flipUnchecked(Mesh& mesh, EdgeHandle e);
+
 /// canFlip with a configurable fold threshold: the two new unit face normals must have a dot
 /// product above `minNewDihedralCosine` (0 for canFlip: no fold sharper than 90 degrees).
 bool isFlipAcceptable(const Mesh& mesh, EdgeHandle e, double minNewDihedralCosine);
