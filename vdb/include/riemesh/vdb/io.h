@@ -1,0 +1,46 @@
+// riemesh/vdb/io.h: reading scalar images from .vdb / .nvdb files and writing grids atomically.
+//
+// A riemesh image is an openvdb::FloatGrid in world space (the grid's transform). Double grids are
+// converted to float. Every reader throws std::runtime_error with a one-line message that names the
+// file and the problem (missing, empty, not a VDB file, truncated, no such grid, not scalar, empty,
+// non-finite voxels with their count).
+#pragma once
+
+#include <openvdb/openvdb.h>
+
+#include <cstdint>
+#include <string>
+
+namespace riemesh::vdb {
+
+/// Calls openvdb::initialize() once (thread-safe); every function here calls it as needed.
+void initialize();
+
+/// "fog", "levelset" or "unknown", from the grid class.
+std::string gridClassName(const openvdb::GridBase& grid);
+
+/// Number of NaN or infinite values among the active voxels and tiles (tiles count once).
+std::uint64_t countNonFinite(const openvdb::FloatGrid& grid);
+
+/// Reads the scalar grid named `gridName` (default: the first float or double grid) from a .vdb file,
+/// as a FloatGrid. Checks: the file exists, is non-empty, is a complete VDB file, the grid exists and
+/// is a scalar float/double grid, has active voxels, and all its active values are finite.
+openvdb::FloatGrid::Ptr readVdbImage(const std::string& path, const std::string& gridName = {});
+
+/// Grids of a riemesh .nvdb file (the image and, when present, the metric) converted back to OpenVDB.
+struct NanoFileGrids {
+    openvdb::FloatGrid::Ptr image;
+    openvdb::Vec3fGrid::Ptr metricDiag, metricOff; ///< null when the file has no metric
+    double muMax = 1.0;                            ///< bound on the metric's eigenvalues
+};
+/// Reads a .nvdb file through riemesh::NanoVolume; `gridName` must match the image grid when given.
+NanoFileGrids readNanoFile(const std::string& path, const std::string& gridName = {});
+
+/// Reads any supported image by extension: .vdb, .nvdb, .nii, .nii.gz.
+openvdb::FloatGrid::Ptr readImage(const std::string& path, const std::string& gridName = {});
+
+/// Writes `grids` to a .vdb file (Blosc or Zip compressed as available) through a temporary file
+/// beside `path`, renamed on success: an existing file is replaced only by a complete one.
+void writeVdb(const std::string& path, const openvdb::GridCPtrVec& grids);
+
+} // namespace riemesh::vdb

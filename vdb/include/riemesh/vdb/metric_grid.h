@@ -1,0 +1,58 @@
+// riemesh/vdb/metric_grid.h: the Riemannian metric built from the structure tensor (paper 4.2, 4.3).
+//
+// Per voxel, with xi_0 >= xi_1 >= xi_2 the eigenvalues of J and w_i its eigenvectors (world space):
+//
+//   G = sum_i mu_i w_i w_i^T,   mu_i = 1 + (muMax - 1) * clamp((xi_i / xi_ref - t) / (1 - t), 0, 1)
+//
+// The paper only says the eigenvalues are "rescaled and thresholded" to [1, muMax]; our choice:
+// - xi_ref, the rescaling, is a robust maximum: the `referencePercentile` quantile of xi_0 over the
+//   image box (a few strong voxels or outliers do not decide the scale; contours reach muMax);
+// - t, the threshold below which a direction stays Euclidean, is max(threshold, noiseFactor *
+//   median(xi_0) / xi_ref): the median of xi_0 over the box measures the gradient energy of noise and
+//   flat texture, so far from contours G is exactly the identity.
+// Then a flat contour gets muMax along its normal and 1 along its tangents (coarse along it, Table 1),
+// a sharp edge also along its curvature direction, a corner in all three.
+//
+// The metric is stored sparse: two Vec3f grids with the image's transform, active only where G
+// differs from the identity, "metric_diag" = (gxx, gyy, gzz) with background (1,1,1) and
+// "metric_off" = (gxy, gxz, gyz) with background (0,0,0); trilinear interpolation between them stays
+// SPD with eigenvalues in [1, muMax] (a convex combination of such matrices). Each grid carries the
+// metadata "riemesh:mu_max" (double).
+#pragma once
+
+#include "riemesh/vdb/structure_tensor.h"
+
+#include <openvdb/openvdb.h>
+
+#include <cstdint>
+
+namespace riemesh::vdb {
+
+struct MetricOptions {
+    double muMax = 9.0;                 ///< largest eigenvalue (resolution x sqrt(muMax) at contours)
+    double referencePercentile = 0.99;  ///< quantile of xi_0 over the box that maps to muMax
+    double threshold = 0.1;             ///< minimum t (fraction of xi_ref) below which mu = 1
+    double noiseFactor = 3.0;           ///< t >= noiseFactor * median(xi_0) / xi_ref
+    double activeTolerance = 1e-3;      ///< voxels with all mu_i - 1 below this stay inactive (G = I)
+};
+
+struct MetricGrids {
+    openvdb::Vec3fGrid::Ptr diag, off;  ///< "metric_diag", "metric_off"
+    double muMax = 1.0;                 ///< bound on the eigenvalues (the option's muMax)
+    double xiRef = 0;                   ///< rescaling reference (intensity^2 / world unit^2)
+    double threshold = 0;               ///< t actually used
+    std::uint64_t activeVoxels = 0;     ///< voxels where G != I
+    std::uint64_t totalVoxels = 0;      ///< voxels of the image box
+};
+
+/// Metric from a structure tensor (the grids of structureTensor()).
+MetricGrids metricFromStructureTensor(const StructureTensorGrids& tensor, const MetricOptions& options = {});
+
+/// Structure tensor and metric of `image` in one call.
+MetricGrids computeMetric(const openvdb::FloatGrid& image, const StructureTensorOptions& tensorOptions = {},
+                          const MetricOptions& options = {});
+
+/// Names and metadata key used in files.
+inline constexpr const char* kMuMaxMetadata = "riemesh:mu_max";
+
+} // namespace riemesh::vdb

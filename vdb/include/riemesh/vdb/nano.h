@@ -1,0 +1,35 @@
+// riemesh/vdb/nano.h: OpenVDB -> NanoVDB for the core and the web viewer.
+//
+// A riemesh .nvdb file holds the image (a float grid, first) and optionally the metric as the Vec3f
+// grids "metric_diag" and "metric_off" (see metric_grid.h), uncompressed so that the browser can read
+// it without zlib. riemesh::NanoVolume (core/image.h) reads it.
+#pragma once
+
+#include "riemesh/image.h"
+
+#include <openvdb/openvdb.h>
+
+#include <nanovdb/util/GridHandle.h>
+
+#include <string>
+#include <vector>
+
+namespace riemesh::vdb {
+
+nanovdb::GridHandle<nanovdb::HostBuffer> toNano(const openvdb::FloatGrid& grid);
+nanovdb::GridHandle<nanovdb::HostBuffer> toNano(const openvdb::Vec3fGrid& grid);
+
+/// The image and optional metric (both metric grids or neither) as NanoVDB handles, image first.
+std::vector<nanovdb::GridHandle<nanovdb::HostBuffer>>
+toNanoHandles(const openvdb::FloatGrid& image, const openvdb::Vec3fGrid* metricDiag = nullptr,
+              const openvdb::Vec3fGrid* metricOff = nullptr);
+
+/// The same as an in-memory riemesh::NanoVolume (what the core evolves against).
+NanoVolume toNanoVolume(const openvdb::FloatGrid& image, const openvdb::Vec3fGrid* metricDiag = nullptr,
+                        const openvdb::Vec3fGrid* metricOff = nullptr);
+
+/// Writes a .nvdb file atomically (temporary file beside `path`, then rename).
+void writeNvdb(const std::string& path, const openvdb::FloatGrid& image,
+               const openvdb::Vec3fGrid* metricDiag = nullptr, const openvdb::Vec3fGrid* metricOff = nullptr);
+
+} // namespace riemesh::vdb

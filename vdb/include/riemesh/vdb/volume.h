@@ -1,0 +1,105 @@
+// riemesh/vdb/volume.h: the converter's pipeline without OpenVDB types, for thin apps.
+//
+// Volume::read (any supported file, all checks) -> smooth (the image the forces see) ->
+// computeMetric -> nano() for the core, writeMetric / exportNanoVDB on request; then
+// writeSurfaceLevelSet for a .vdb output. Including this header does not include OpenVDB.
+#pragma once
+
+#include "riemesh/image.h"
+#include "riemesh/mesh.h"
+
+#include <cstdint>
+#include <functional>
+#include <memory>
+#include <string>
+#include <vector>
+
+namespace riemesh::vdb {
+
+struct ImageInfo {
+    std::string path;
+    std::string format;          ///< "vdb", "nvdb" or "nifti"
+    std::string gridName;
+    std::string gridClass;       ///< "fog", "levelset" or "unknown"
+    double voxelSize = 1;        ///< world units per voxel (largest axis for anisotropic transforms)
+    Box3 worldBounds;            ///< world box of the active voxels
+    int dims[3] = {0, 0, 0};     ///< active bounding box, voxels
+    std::uint64_t activeVoxels = 0;
+    double minValue = 0, maxValue = 0;
+    std::string transformNote;   ///< e.g. "NIfTI scanner space (RAS, mm) from sform"
+};
+
+struct VolumeMetricOptions {
+    double sigma = 1.0;         ///< structure tensor pre-smoothing (voxels)
+    double rho = 2.0;           ///< structure tensor window (voxels)
+    double muMax = 9.0;         ///< largest metric eigenvalue
+};
+
+struct VolumeMetricStats {
+    std::uint64_t activeVoxels = 0, totalVoxels = 0;
+    double xiRef = 0, threshold = 0, seconds = 0;
+};
+
+class Volume {
+public:
+    /// Reads .vdb (grid `gridName` or the first scalar grid), .nvdb (riemesh files, with their metric
+    /// if any) or .nii/.nii.gz. Throws std::runtime_error with a one-line message naming the problem.
+    static Volume read(const std::string& path, const std::string& gridName = {});
+
+    Volume();
+    ~Volume();
+    Volume(Volume&&) noexcept;
+    Volume& operator=(Volume&&) noexcept;
+
+    const ImageInfo& info() const;
+
+    /// Replaces the image by its Gaussian smoothing (sigma in voxels; 0 does nothing).
+    void smooth(double sigmaVoxels);
+
+    /// Computes the structure-tensor metric of the current image (replacing any metric read from a
+    /// .nvdb file).
+    VolumeMetricStats computeMetric(const VolumeMetricOptions& options);
+    bool hasMetric() const;
+    double metricMaxEigenvalue() const;
+
+    /// The image and metric (when present) as NanoVDB grids for the core.
+    NanoVolume nano() const;
+
+    /// metric_diag + metric_off to a .vdb file (for Houdini / vdb_view), atomically. Needs a metric.
+    void writeMetric(const std::string& path) const;
+    /// Image + metric to a .nvdb file (the web viewer's input), atomically.
+    void exportNanoVDB(const std::string& path) const;
+
+    /// The mesh as a level set "surface" with this image's transform, to a .vdb file, atomically.
+    void writeSurfaceLevelSet(const std::string& path, const Mesh& mesh) const;
+
+private:
+    struct Impl;
+    std::unique_ptr<Impl> mImpl;
+};
+
+/// Accuracy of `mesh` against a reference signed distance grid (default grid "sdf") in a .vdb file,
+/// in world units (see level_set.h).
+struct ReferenceError {
+    double mean = 0, maxVertex = 0, maxSurface = 0, hausdorff = 0, voxelSize = 1;
+};
+ReferenceError compareToReference(const Mesh& mesh, const std::string& path, const std::string& gridName = "sdf");
+
+/// Makes the phantom `shape` (see phantom.h: "cube-cavity", "ball", "torus", "two-spheres",
+/// "thin-plate") and writes its "density" and "sdf" grids to a .vdb file atomically. Throws
+/// std::invalid_argument for an unknown shape or bad parameters.
+void writePhantom(const std::string& shape, const std::string& path, int size, double noise, std::uint64_t seed);
+/// The valid phantom shape names.
+std::vector<std::string> phantomShapes();
+
+/// Limits TBB to `threads` threads for the lifetime of the returned object (0: all cores).
+std::shared_ptr<void> limitThreads(int threads);
+
+/// Writes a file through a temporary file beside `path` that `write` fills, renamed on success; on
+/// any exception the temporary is removed and the exception rethrown (an existing file is untouched).
+void writeFileAtomically(const std::string& path, const std::function<void(const std::string& tempPath)>& write);
+
+/// Lowercase extension including the dot, ".nii.gz" recognised as one ("" when none).
+std::string fileExtension(const std::string& path);
+
+} // namespace riemesh::vdb

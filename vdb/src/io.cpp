@@ -1,0 +1,347 @@
+// OpenVDB / NanoVDB file I/O, NanoVDB conversion and mesh level sets (io.h, nano.h, level_set.h).
+#include "riemesh/vdb/io.h"
+#include "riemesh/vdb/level_set.h"
+#include "riemesh/vdb/metric_grid.h"
+#include "riemesh/vdb/nano.h"
+#include "riemesh/vdb/nifti.h"
+#include "riemesh/vdb/volume.h"
+
+#include <openvdb/io/File.h>
+#include <openvdb/tools/MeshToVolume.h>
+#include <openvdb/tools/Interpolation.h>
+
+#include <nanovdb/util/IO.h>
+#include <nanovdb/util/NanoToOpenVDB.h>
+#include <nanovdb/util/OpenToNanoVDB.h>
+
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_reduce.h>
+
+#include <algorithm>
+#include <cmath>
+#include <filesystem>
+#include <mutex>
+#include <sstream>
+#include <stdexcept>
+
+namespace fs = std::filesystem;
+
+namespace riemesh::vdb {
+
+void initialize()
+{
+    static std::once_flag once;
+    std::call_once(once, [] { openvdb::initialize(); });
+}
+
+std::string gridClassName(const openvdb::GridBase& grid)
+{
+    switch (grid.getGridClass()) {
+    case openvdb::GRID_FOG_VOLUME: return "fog";
+    case openvdb::GRID_LEVEL_SET: return "levelset";
+    default: return "unknown";
+    }
+}
+
+std::uint64_t countNonFinite(const openvdb::FloatGrid& grid)
+{
+    std::uint64_t count = 0;
+    for (auto it = grid.tree().cbeginValueOn(); it; ++it)
+        if (!std::isfinite(*it)) ++count;
+    return count;
+}
+
+namespace {
+
+std::runtime_error fileError(const std::string& path, const std::string& what)
+{
+    return std::runtime_error("'" + path + "': " + what);
+}
+
+void checkReadableFile(const std::string& path)
+{
+    std::error_code ec;
+    if (!fs::exists(path, ec)) throw fileError(path, "no such file");
+    if (fs::is_directory(path, ec)) throw fileError(path, "is a directory, not a file");
+    if (fs::file_size(path, ec) == 0 || ec) throw fileError(path, "file is empty");
+}
+
+/// Why a VDB read failed, in words: OpenVDB's messages are terse ("IoError: ...").
+std::string describeVdbFailure(const std::string& what)
+{
+    std::string lower = what;
+    std::transform(lower.begin(), lower.end(), lower.begin(), [](unsigned char c) { return std::tolower(c); });
+    if (lower.find("not a vdb file") != std::string::npos || lower.find("magic") != std::string::npos)
+        return "not a VDB file";
+    return "truncated or corrupt VDB file (" + what + ")";
+}
+
+openvdb::FloatGrid::Ptr checkedImage(openvdb::FloatGrid::Ptr grid, const std::string& path)
+{
+    const std::string name = grid->getName();
+    if (grid->tree().activeVoxelCount() == 0)
+        throw fileError(path, "grid '" + name + "' is empty (no active voxels)");
+    if (const auto bad = countNonFinite(*grid))
+        throw fileError(path, "grid '" + name + "' has " + std::to_string(bad) +
+                                  " non-finite (NaN or infinite) voxel values");
+    if (!std::isfinite(grid->background()))
+        throw fileError(path, "grid '" + name + "' has a non-finite background value");
+    return grid;
+}
+
+openvdb::FloatGrid::Ptr toFloatGrid(const openvdb::GridBase::Ptr& base)
+{
+    if (auto f = openvdb::GridBase::grid<openvdb::FloatGrid>(base)) return f;
+    auto d = openvdb::GridBase::grid<openvdb::DoubleGrid>(base);
+    // Value-converting deep copy (double -> float), tiles and activity preserved.
+    auto tree = openvdb::FloatTree::Ptr(new openvdb::FloatTree(d->tree()));
+    auto f = openvdb::FloatGrid::create(tree);
+    f->setTransform(d->transform().copy());
+    f->setName(d->getName());
+    f->setGridClass(d->getGridClass());
+    return f;
+}
+
+} // namespace
+
+openvdb::FloatGrid::Ptr readVdbImage(const std::string& path, const std::string& gridName)
+{
+    initialize();
+    checkReadableFile(path);
+    openvdb::io::File file(path);
+    openvdb::GridPtrVecPtr metas;
+    try {
+        file.open(/*delayLoad=*/false);
+        metas = file.readAllGridMetadata();
+    } catch (const std::exception& e) {
+        throw fileError(path, describeVdbFailure(e.what()));
+    }
+    if (!metas || metas->empty()) throw fileError(path, "the VDB file holds no grid");
+
+    openvdb::GridBase::Ptr chosen;
+    std::string names;
+    for (const auto& g : *metas) {
+        names += (names.empty() ? "" : ", ") + g->getName() + " (" + g->valueType() + ")";
+        const bool scalar = g->isType<openvdb::FloatGrid>() || g->isType<openvdb::DoubleGrid>();
+        if (gridName.empty() ? (scalar && !chosen) : (g->getName() == gridName && !chosen)) chosen = g;
+    }
+    if (!chosen) {
+        if (gridName.empty()) throw fileError(path, "no scalar float or double grid (grids: " + names + ")");
+        throw fileError(path, "no grid named '" + gridName + "' (grids: " + names + ")");
+    }
+    if (!(chosen->isType<openvdb::FloatGrid>() || chosen->isType<openvdb::DoubleGrid>()))
+        throw fileError(path, "grid '" + chosen->getName() + "' holds " + chosen->valueType() +
+                                  " values, not a scalar float or double grid");
+
+    openvdb::GridBase::Ptr base;
+    try {
+        base = file.readGrid(chosen->getName());
+        file.close();
+    } catch (const std::exception& e) {
+        throw fileError(path, describeVdbFailure(e.what()));
+    }
+    if (!base) throw fileError(path, "could not read grid '" + chosen->getName() + "'");
+    auto grid = toFloatGrid(base);
+    if (!grid->transform().isLinear())
+        throw fileError(path, "grid '" + grid->getName() + "' has a non-linear (frustum) transform");
+    return checkedImage(grid, path);
+}
+
+NanoFileGrids readNanoFile(const std::string& path, const std::string& gridName)
+{
+    initialize();
+    checkReadableFile(path);
+    NanoVolume volume;
+    try {
+        volume = NanoVolume::read(path);
+    } catch (const std::exception& e) {
+        throw fileError(path, e.what());
+    }
+    if (!gridName.empty() && volume.imageName() != gridName)
+        throw fileError(path, "no image grid named '" + gridName + "' (image grid: '" + volume.imageName() + "')");
+    NanoFileGrids out;
+    out.image = nanovdb::nanoToOpenVDB(*volume.imageGrid());
+    out.image->setName(volume.imageName());
+    const std::string cls = volume.imageClass();
+    out.image->setGridClass(cls == "fog" ? openvdb::GRID_FOG_VOLUME
+                                         : cls == "levelset" ? openvdb::GRID_LEVEL_SET : openvdb::GRID_UNKNOWN);
+    checkedImage(out.image, path);
+    if (volume.metricDiag() && volume.metricOff()) {
+        out.metricDiag = nanovdb::nanoToOpenVDB(*volume.metricDiag());
+        out.metricOff = nanovdb::nanoToOpenVDB(*volume.metricOff());
+        out.metricDiag->setName(kMetricDiagGrid);
+        out.metricOff->setName(kMetricOffGrid);
+        out.muMax = volume.metricMaxEigenvalue();
+    }
+    return out;
+}
+
+openvdb::FloatGrid::Ptr readImage(const std::string& path, const std::string& gridName)
+{
+    const std::string ext = fileExtension(path);
+    if (ext == ".vdb") return readVdbImage(path, gridName);
+    if (ext == ".nvdb") return readNanoFile(path, gridName).image;
+    if (ext == ".nii" || ext == ".nii.gz") return readNifti(path);
+    throw fileError(path, "unknown input extension '" + ext + "' (expected .vdb, .nvdb, .nii or .nii.gz)");
+}
+
+void writeVdb(const std::string& path, const openvdb::GridCPtrVec& grids)
+{
+    initialize();
+    writeFileAtomically(path, [&](const std::string& temp) {
+        openvdb::io::File file(temp);
+        file.write(grids);
+        file.close();
+    });
+}
+
+// ---- nano.h --------------------------------------------------------------------------------------
+
+nanovdb::GridHandle<nanovdb::HostBuffer> toNano(const openvdb::FloatGrid& grid)
+{
+    return nanovdb::openToNanoVDB(grid);
+}
+
+nanovdb::GridHandle<nanovdb::HostBuffer> toNano(const openvdb::Vec3fGrid& grid)
+{
+    return nanovdb::openToNanoVDB(grid);
+}
+
+std::vector<nanovdb::GridHandle<nanovdb::HostBuffer>>
+toNanoHandles(const openvdb::FloatGrid& image, const openvdb::Vec3fGrid* metricDiag, const openvdb::Vec3fGrid* metricOff)
+{
+    if (bool(metricDiag) != bool(metricOff))
+        throw std::invalid_argument("toNanoHandles: give both metric grids or neither");
+    std::vector<nanovdb::GridHandle<nanovdb::HostBuffer>> handles;
+    handles.push_back(toNano(image));
+    if (metricDiag) {
+        handles.push_back(toNano(*metricDiag));
+        handles.push_back(toNano(*metricOff));
+    }
+    return handles;
+}
+
+NanoVolume toNanoVolume(const openvdb::FloatGrid& image, const openvdb::Vec3fGrid* metricDiag,
+                        const openvdb::Vec3fGrid* metricOff)
+{
+    const auto handles = toNanoHandles(image, metricDiag, metricOff);
+    // NanoVDB 10's writeGrids seeks past the end of the stream to leave room for its header, which
+    // fails on an empty string stream: give it a zero-filled buffer large enough for everything.
+    std::size_t capacity = std::size_t(1) << 16;
+    for (const auto& h : handles) capacity += h.size() + 4096;
+    std::stringstream out(std::string(capacity, '\0'), std::ios::in | std::ios::out | std::ios::binary);
+    nanovdb::io::writeGrids<nanovdb::HostBuffer, std::vector>(out, handles);
+    const auto end = out.tellp();
+    if (!out || end <= 0) throw std::runtime_error("NanoVDB serialisation failed");
+    const std::string bytes = out.str();
+    return NanoVolume::fromBytes(reinterpret_cast<const std::uint8_t*>(bytes.data()), std::size_t(end));
+}
+
+void writeNvdb(const std::string& path, const openvdb::FloatGrid& image, const openvdb::Vec3fGrid* metricDiag,
+               const openvdb::Vec3fGrid* metricOff)
+{
+    const auto handles = toNanoHandles(image, metricDiag, metricOff);
+    writeFileAtomically(path, [&](const std::string& temp) {
+        nanovdb::io::writeGrids<nanovdb::HostBuffer, std::vector>(temp, handles);
+    });
+}
+
+// ---- level_set.h ---------------------------------------------------------------------------------
+
+namespace {
+
+void meshArrays(const Mesh& mesh, const openvdb::math::Transform& transform, std::vector<openvdb::Vec3s>& points,
+                std::vector<openvdb::Vec3I>& triangles)
+{
+    std::vector<int> index(mesh.n_vertices(), -1);
+    points.clear();
+    triangles.clear();
+    for (auto v : mesh.vertices()) {
+        if (mesh.status(v).deleted()) continue;
+        index[v.idx()] = int(points.size());
+        const auto p = mesh.point(v);
+        points.push_back(openvdb::Vec3s(transform.worldToIndex(openvdb::Vec3d(p[0], p[1], p[2]))));
+    }
+    for (auto f : mesh.faces()) {
+        if (mesh.status(f).deleted()) continue;
+        openvdb::Vec3I t;
+        int n = 0;
+        for (auto v : mesh.fv_range(f)) t[n++] = openvdb::Index32(index[v.idx()]);
+        if (n == 3) triangles.push_back(t);
+    }
+}
+
+} // namespace
+
+openvdb::FloatGrid::Ptr meshToSurfaceLevelSet(const Mesh& mesh, const openvdb::math::Transform& transform,
+                                              float halfWidth)
+{
+    initialize();
+    std::vector<openvdb::Vec3s> points;
+    std::vector<openvdb::Vec3I> triangles;
+    meshArrays(mesh, transform, points, triangles);
+    // Points are in index space (what the adapter expects); distances come out in world units.
+    openvdb::tools::QuadAndTriangleDataAdapter<openvdb::Vec3s, openvdb::Vec3I> adapter(points, triangles);
+    auto grid = openvdb::tools::meshToVolume<openvdb::FloatGrid>(adapter, transform, halfWidth, halfWidth);
+    grid->setTransform(transform.copy());
+    grid->setName("surface");
+    grid->setGridClass(openvdb::GRID_LEVEL_SET);
+    return grid;
+}
+
+SurfaceError surfaceError(const Mesh& mesh, const openvdb::FloatGrid& sdf)
+{
+    initialize();
+    SurfaceError err;
+    const auto& xform = sdf.transform();
+    // Mesh -> surface: |sdf| at the vertices.
+    {
+        openvdb::tools::GridSampler<openvdb::FloatGrid, openvdb::tools::BoxSampler> sampler(sdf);
+        double sum = 0;
+        std::size_t n = 0;
+        for (auto v : mesh.vertices()) {
+            if (mesh.status(v).deleted()) continue;
+            const auto p = mesh.point(v);
+            const double d = std::abs(sampler.wsSample(openvdb::Vec3d(p[0], p[1], p[2])));
+            sum += d;
+            err.maxVertexDistance = std::max(err.maxVertexDistance, d);
+            ++n;
+        }
+        err.meanVertexDistance = n ? sum / double(n) : 0.0;
+    }
+    // Surface -> mesh: reference points on sdf = 0, distance read from the mesh's unsigned distance.
+    {
+        std::vector<openvdb::Vec3s> points;
+        std::vector<openvdb::Vec3I> triangles;
+        meshArrays(mesh, xform, points, triangles);
+        openvdb::tools::QuadAndTriangleDataAdapter<openvdb::Vec3s, openvdb::Vec3I> adapter(points, triangles);
+        const float band = 16.0f; // voxels: farther reference points read the background (16 voxels)
+        auto udf = openvdb::tools::meshToVolume<openvdb::FloatGrid>(adapter, xform, band, band,
+                                                                    openvdb::tools::UNSIGNED_DISTANCE_FIELD);
+        openvdb::tools::GridSampler<openvdb::FloatGrid, openvdb::tools::BoxSampler> udfSampler(*udf);
+        openvdb::tools::GridSampler<openvdb::FloatGrid, openvdb::tools::BoxSampler> sdfSampler(sdf);
+        const double h = xform.voxelSize()[0];
+        for (auto it = sdf.tree().cbeginValueOn(); it; ++it) {
+            if (!it.isVoxelValue() || std::abs(*it) >= 0.5 * h) continue;
+            const openvdb::Coord c = it.getCoord();
+            const openvdb::Vec3d x = xform.indexToWorld(c);
+            // Gradient of the sdf by central differences (unit length for an exact distance).
+            openvdb::Vec3d g;
+            for (int a = 0; a < 3; ++a) {
+                openvdb::Vec3d e(0);
+                e[a] = h;
+                g[a] = (sdfSampler.wsSample(x + e) - sdfSampler.wsSample(x - e)) / (2 * h);
+            }
+            if (g.length() < 1e-6) continue;
+            g.normalize();
+            const openvdb::Vec3d onSurface = x - double(*it) * g;
+            const double d = udfSampler.wsSample(onSurface);
+            err.maxSurfaceDistance = std::max(err.maxSurfaceDistance, d);
+            ++err.samples;
+        }
+    }
+    err.hausdorff = std::max(err.maxVertexDistance, err.maxSurfaceDistance);
+    return err;
+}
+
+} // namespace riemesh::vdb
