@@ -21,15 +21,13 @@ namespace {
 /// 60 degrees between u and w, the chord leaves the tangent plane by half that angle, so real
 /// same-sheet pairs pass; two facing sheets (opposite normals) or stacked sheets (w in front of
 /// u) do not.
-bool isSameSheetPair(const Vec3& nu, const Vec3& nw, const Vec3& d, double squaredDistance)
-{
-    constexpr double kNormalAgreement = 0.5;    // cos 60 degrees
-    constexpr double kSquaredTangentSlope = 0.25; // (sin 30 degrees)^2
-    if (nu.dot(nw) <= kNormalAgreement) return false;
-    const double limit = kSquaredTangentSlope * squaredDistance;
-    const double hu = d.dot(nu), hw = d.dot(nw);
-    return hu * hu <= limit && hw * hw <= limit;
-}
+constexpr double kNormalAgreement = 0.5;      // cos 60 degrees
+constexpr double kSquaredTangentSlope = 0.25; // (sin 30 degrees)^2
+/// Two sides of a convex crease (a box edge being rounded off) lie behind each other's tangent
+/// planes; on a coarse mesh (edges up to zeta delta) their mesh path can exceed kappa * radius.
+/// They cannot be colliding sheets unless the normals are nearly opposite (a thin plate, which
+/// the paper does report under a coarse Euclidean metric).
+constexpr double kCreaseAgreement = -0.5; // cos 120 degrees
 
 } // namespace
 
@@ -70,17 +68,13 @@ std::vector<CollisionPair> findCollisions(const Mesh& mesh, const MetricField& m
         normal[c.idx()] += fn;
     }
 
-    std::vector<Vec3> points, normals;
+    std::vector<Vec3> points;
     std::vector<int> ids;
     points.reserve(n);
-    normals.reserve(n);
     ids.reserve(n);
     for (auto v : mesh.vertices()) {
         points.push_back(position(mesh, v));
         ids.push_back(v.idx());
-        const Vec3& nv = normal[v.idx()];
-        const double len = nv.norm();
-        normals.push_back(len > 0 ? Vec3(nv / len) : Vec3::Zero());
     }
     if (points.empty()) return result;
 
@@ -88,7 +82,7 @@ std::vector<CollisionPair> findCollisions(const Mesh& mesh, const MetricField& m
     const bool hasCutIds = mesh.get_property_handle(cutId, kCutIdProperty);
 
     detail::SpatialHash hash;
-    hash.build(points, ids, radius, normals);
+    hash.build(points, ids, radius);
 
     // Candidates that no cheap test rules out; ordered (u < w by index).
     struct Candidate {
@@ -96,9 +90,21 @@ std::vector<CollisionPair> findCollisions(const Mesh& mesh, const MetricField& m
         double distance; // metric length (world units)
     };
     std::vector<Candidate> candidates;
-    hash.forEachPairWithin(radius, [&](std::uint32_t sa, std::uint32_t sb, double d2) {
-        const Vec3 d = hash.point(sb) - hash.point(sa);
-        if (isSameSheetPair(hash.normal(sa), hash.normal(sb), d, d2)) return;
+
+    // Structure-of-arrays copies in slot order, so that the pair loop below is branch-free except
+    // for the (rare) pairs that survive the cheap tests.
+    const std::size_t count = hash.size();
+    std::vector<double> px(count), py(count), pz(count), nx(count), ny(count), nz(count);
+    for (std::uint32_t s = 0; s < count; ++s) {
+        const Vec3& p = hash.point(s);
+        const Vec3& nv = normal[hash.id(s)];
+        const double len = nv.norm();
+        const double inv = len > 0 ? 1.0 / len : 0.0; // unit normal (zero for isolated vertices)
+        px[s] = p.x(); py[s] = p.y(); pz[s] = p.z();
+        nx[s] = nv.x() * inv; ny[s] = nv.y() * inv; nz[s] = nv.z() * inv;
+    }
+    const double r2 = radius * radius;
+    auto consider = [&](std::uint32_t sa, std::uint32_t sb, double d2) {
         const int a = hash.id(sa), b = hash.id(sb);
         const VertexHandle va(a), vb(b);
         if (hasCutIds) {
@@ -111,6 +117,31 @@ std::vector<CollisionPair> findCollisions(const Mesh& mesh, const MetricField& m
             if (dR > radius) return;
         }
         candidates.push_back({std::min(a, b), std::max(a, b), dR});
+    };
+    const double* const qx = px.data(); // raw pointers: no reload after a candidate push_back
+    const double* const qy = py.data();
+    const double* const qz = pz.data();
+    const double* const mx = nx.data();
+    const double* const my = ny.data();
+    const double* const mz = nz.data();
+    hash.forEachCellPair([&](std::uint32_t a0, std::uint32_t a1, std::uint32_t b0, std::uint32_t b1) {
+        for (std::uint32_t s = a0; s < a1; ++s) {
+            const double x = qx[s], y = qy[s], z = qz[s], ux = mx[s], uy = my[s], uz = mz[s];
+            for (std::uint32_t t = (a0 == b0 ? s + 1 : b0); t < b1; ++t) {
+                const double dx = qx[t] - x, dy = qy[t] - y, dz = qz[t] - z;
+                const double d2 = dx * dx + dy * dy + dz * dz;
+                const double agree = ux * mx[t] + uy * my[t] + uz * mz[t];
+                const double hu = dx * ux + dy * uy + dz * uz;
+                const double hw = dx * mx[t] + dy * my[t] + dz * mz[t];
+                const double limit = kSquaredTangentSlope * d2;
+                const bool flat = (agree > kNormalAgreement) & (hu * hu <= limit) & (hw * hw <= limit);
+                // Convex crease: each vertex behind the other's tangent plane and the normals
+                // less than 120 degrees apart (a thin plate has opposite normals and stays in).
+                const bool crease = (agree > kCreaseAgreement) & (hu < 0) & (hw > 0);
+                const bool sameSheet = flat | crease;
+                if ((d2 <= r2) & !sameSheet) consider(s, t, d2);
+            }
+        }
     });
     if (candidates.empty()) return result;
 

@@ -17,10 +17,12 @@ struct CollisionOptions {
     double zeta = 2.5;  ///< longest/shortest edge ratio
     double vmax = 0.5;  ///< largest displacement per iteration (world units)
     /// kappa: a pair (u, w) is on the same local sheet, hence no collision, when w is reachable
-    /// from u by an edge path whose Euclidean length is <= kappa * collisionRadius (world units,
-    /// radius taken numerically). 2 keeps the 2- and 3-rings of regular meshes and sharply curved
-    /// sheets (geodesic <= pi/2 chord, times the zig-zag of mesh paths) out of the results.
-    double neighbourhoodFactor = 2.0;
+    /// from u by an edge path whose Euclidean length is <= kappa * collisionRadius (world units).
+    /// The radius is ~0.97 zeta delta (Euclidean), so kappa = 2 would not even cover the 2-ring
+    /// of a mesh whose edges are all near zeta delta (path 2 zeta delta, seen in a deflating box);
+    /// 3 covers two rings of the longest edges and three of typical ones, and sharply curved sheets
+    /// (geodesic <= pi/2 chord, times the zig-zag of mesh paths).
+    double neighbourhoodFactor = 3.0;
 };
 
 /// The search radius lambda * zeta * delta (metric length, world units), lambda_E when
@@ -35,7 +37,8 @@ double collisionLambda(bool euclidean, double zeta, double delta, double vmax);
 /// A pair is reported when d_R(u, w) <= collisionRadius and w is not within u's mesh
 /// neighbourhood (see neighbourhoodFactor). Pairs whose vertex normals agree (n_u . n_w > 0.5)
 /// and that lie nearly in each other's tangent planes are same-sheet pairs and skipped without a
-/// search. Pairs of vertices tagged with the same cut id (the two sides of a tunnel cut, see
+/// search, as are the two sides of a convex crease (each behind the other's tangent plane, normals
+/// less than 120 degrees apart). Pairs of vertices tagged with the same cut id (the two sides of a tunnel cut, see
 /// kCutIdProperty in topology.h) are never reported, so a fresh cut is not merged back at once.
 /// Deleted vertices are ignored.
 std::vector<CollisionPair> findCollisions(const Mesh& mesh, const MetricField& metric,

@@ -63,7 +63,7 @@ struct TopologyOptions {
     /// A merge candidate is skipped when, after the earlier edits of the same call, w has become
     /// reachable from u by an edge path at most this long (world units): the earlier merge already
     /// joined that region. <= 0: 3 x the mean length of the edges around u and w (roughly
-    /// kappa * collision radius for a regular mesh). Pass neighbourhoodFactor * collisionRadius
+    /// 2 x the collision radius for a regular mesh). Pass neighbourhoodFactor * collisionRadius
     /// for the exact value used by findCollisions.
     double neighbourhoodRadius = 0.0;
 };

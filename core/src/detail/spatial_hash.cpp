@@ -51,7 +51,11 @@ void SpatialHash::build(const std::vector<Eigen::Vector3d>& points, const std::v
         bucket[i] = bucketOf(key);
         ++mBucketStart[bucket[i] + 1];
     }
-    for (std::size_t b = 0; b < tableSize; ++b) mBucketStart[b + 1] += mBucketStart[b];
+    mOccupied.assign((tableSize + 63) / 64, 0);
+    for (std::size_t b = 0; b < tableSize; ++b) {
+        if (mBucketStart[b + 1] > 0) mOccupied[b >> 6] |= std::uint64_t(1) << (b & 63);
+        mBucketStart[b + 1] += mBucketStart[b];
+    }
 
     // Counting sort by bucket, then insertion sort by key inside each (small) bucket.
     std::vector<std::uint32_t> order(n), slot(mBucketStart.begin(), mBucketStart.end() - 1);

@@ -24,6 +24,24 @@ public:
     void build(const std::vector<Eigen::Vector3d>& points, const std::vector<int>& ids, double cellSize,
                const std::vector<Eigen::Vector3d>& normals = {});
 
+    /// Calls f(a0, a1, b0, b1) once for every pair of neighbouring occupied cells (the half
+    /// stencil), with the slot ranges [a0, a1) and [b0, b1) of their points; for a cell paired
+    /// with itself the two ranges are equal (pair slot s only with slots t > s then). Every pair
+    /// of points closer than the cell size lies in exactly one such call.
+    template <class F>
+    void forEachCellPair(F&& f) const
+    {
+        for (std::size_t c = 0; c + 1 < mCellStart.size(); ++c) {
+            const std::uint32_t s0 = mCellStart[c], s1 = mCellStart[c + 1];
+            f(s0, s1, s0, s1);
+            const std::uint64_t key = mKeys[s0];
+            for (const std::uint64_t offset : kForwardOffsets) {
+                std::uint32_t t0 = 0, t1 = 0;
+                if (findCell(key + offset, t0, t1)) f(s0, s1, t0, t1);
+            }
+        }
+    }
+
     /// Calls f(slotA, slotB, squaredDistance) once for every unordered pair of distinct points
     /// with squared Euclidean distance <= radius^2 (world units; radius <= the cell size). Slots
     /// index id(), point() and normal().
@@ -31,29 +49,15 @@ public:
     void forEachPairWithin(double radius, F&& f) const
     {
         const double r2 = radius * radius;
-        for (std::size_t c = 0; c + 1 < mCellStart.size(); ++c) {
-            const std::uint32_t s0 = mCellStart[c], s1 = mCellStart[c + 1];
-            const std::uint64_t key = mKeys[s0];
-            // Pairs inside the cell.
-            for (std::uint32_t s = s0; s < s1; ++s)
-                for (std::uint32_t t = s + 1; t < s1; ++t) {
-                    const double d2 = (mPoints[t] - mPoints[s]).squaredNorm();
+        forEachCellPair([&](std::uint32_t a0, std::uint32_t a1, std::uint32_t b0, std::uint32_t b1) {
+            for (std::uint32_t s = a0; s < a1; ++s) {
+                const Eigen::Vector3d& p = mPoints[s];
+                for (std::uint32_t t = (a0 == b0 ? s + 1 : b0); t < b1; ++t) {
+                    const double d2 = (mPoints[t] - p).squaredNorm();
                     if (d2 <= r2) f(s, t, d2);
                 }
-            // Pairs with the 13 forward neighbour cells.
-            for (const std::uint64_t offset : kForwardOffsets) {
-                const std::uint64_t q = key + offset;
-                std::uint32_t t0 = 0, t1 = 0;
-                if (!findCell(q, t0, t1)) continue;
-                for (std::uint32_t s = s0; s < s1; ++s) {
-                    const Eigen::Vector3d& p = mPoints[s];
-                    for (std::uint32_t t = t0; t < t1; ++t) {
-                        const double d2 = (mPoints[t] - p).squaredNorm();
-                        if (d2 <= r2) f(s, t, d2);
-                    }
-                }
             }
-        }
+        });
     }
 
     std::size_t size() const { return mPoints.size(); }
@@ -74,6 +78,7 @@ private:
     bool findCell(std::uint64_t key, std::uint32_t& t0, std::uint32_t& t1) const
     {
         const std::uint32_t b = bucketOf(key);
+        if (!(mOccupied[b >> 6] >> (b & 63) & 1u)) return false; // most stencil cells are empty
         std::uint32_t t = mBucketStart[b];
         const std::uint32_t end = mBucketStart[b + 1];
         while (t < end && mKeys[t] < key) ++t;
@@ -86,6 +91,7 @@ private:
 
     int mShift = 60;
     std::vector<std::uint32_t> mBucketStart; ///< bucket b holds sorted slots [start[b], start[b+1])
+    std::vector<std::uint64_t> mOccupied;    ///< one bit per bucket: non-empty (small, stays in cache)
     std::vector<std::uint32_t> mCellStart;   ///< occupied cell c holds slots [start[c], start[c+1])
     std::vector<Eigen::Vector3d> mPoints;    ///< positions in sorted order (world units)
     std::vector<std::uint64_t> mKeys;        ///< packed cell coordinates in sorted order
