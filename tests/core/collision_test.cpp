@@ -207,3 +207,17 @@ TEST_CASE("collision: timing on icospheres with edge ~ delta and no collisions")
         CHECK(euclidean < 2e-3 * double(sphere.n_vertices()));
     }
 }
+
+TEST_CASE("collision: a coarse box (edges near zeta delta) and its sharp edges never collide with themselves")
+{
+    // Edges of up to 2.4 delta: the 2-ring is up to ~4.8 delta away along the mesh, more than
+    // 2 x the Euclidean radius; the box's 90-degree creases put vertices of two faces within the
+    // radius with perpendicular normals.
+    CollisionOptions o; // delta 1, zeta 2.5
+    for (double edge : {1.6, 2.0, 2.4}) {
+        const Mesh box = makeBox(Vec3(-7.5, -7.5, -7.5), Vec3(7.5, 7.5, 7.5), edge);
+        INFO("edge " << edge);
+        CHECK(findCollisions(box, EuclideanMetric(), o).empty());
+        CHECK(findCollisions(box, ConstantMetric(Vec3(1, 1.5, 2).asDiagonal().toDenseMatrix()), o).empty());
+    }
+}
