@@ -309,15 +309,16 @@ SurfaceError surfaceError(const Mesh& mesh, const openvdb::FloatGrid& sdf)
         }
         err.meanVertexDistance = n ? sum / double(n) : 0.0;
     }
-    // Surface -> mesh: reference points on sdf = 0, distance read from the mesh's unsigned distance.
+    // Surface -> mesh: reference points on sdf = 0, distance read from the mesh's signed distance.
     {
         std::vector<openvdb::Vec3s> points;
         std::vector<openvdb::Vec3I> triangles;
         meshArrays(mesh, xform, points, triangles);
         openvdb::tools::QuadAndTriangleDataAdapter<openvdb::Vec3s, openvdb::Vec3I> adapter(points, triangles);
-        const float band = 16.0f; // voxels: farther reference points read the background (16 voxels)
-        auto udf = openvdb::tools::meshToVolume<openvdb::FloatGrid>(adapter, xform, band, band,
-                                                                    openvdb::tools::UNSIGNED_DISTANCE_FIELD);
+        // A signed distance (the mesh is closed) interpolates linearly across the surface, where an
+        // unsigned one would read up to half a voxel too far. Farther than the band reads the band.
+        const float band = 16.0f; // voxels
+        auto udf = openvdb::tools::meshToVolume<openvdb::FloatGrid>(adapter, xform, band, band);
         openvdb::tools::GridSampler<openvdb::FloatGrid, openvdb::tools::BoxSampler> udfSampler(*udf);
         openvdb::tools::GridSampler<openvdb::FloatGrid, openvdb::tools::BoxSampler> sdfSampler(sdf);
         const double h = xform.voxelSize()[0];
@@ -335,7 +336,7 @@ SurfaceError surfaceError(const Mesh& mesh, const openvdb::FloatGrid& sdf)
             if (g.length() < 1e-6) continue;
             g.normalize();
             const openvdb::Vec3d onSurface = x - double(*it) * g;
-            const double d = udfSampler.wsSample(onSurface);
+            const double d = std::abs(udfSampler.wsSample(onSurface));
             err.maxSurfaceDistance = std::max(err.maxSurfaceDistance, d);
             ++err.samples;
         }

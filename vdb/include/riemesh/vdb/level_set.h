@@ -25,7 +25,8 @@ struct SurfaceError {
     std::size_t samples = 0;         ///< reference surface points used
 };
 /// Reference surface points are the projections onto sdf = 0 of the voxels with |sdf| < voxel/2;
-/// their distance to the mesh is read from an unsigned distance grid of the mesh.
+/// their distance to the mesh is read (trilinearly) from a signed distance grid of the closed mesh with
+/// the sdf's transform and a band of 16 voxels (larger distances read as 16 voxels).
 SurfaceError surfaceError(const Mesh& mesh, const openvdb::FloatGrid& sdf);
 
 } // namespace riemesh::vdb

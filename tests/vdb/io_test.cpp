@@ -1,0 +1,290 @@
+// Reading and writing: NIfTI (Colin27 and a file written here with nifticlib), .vdb and .nvdb round
+// trips, refusals with messages that name the problem, mesh level sets and accuracy against an sdf.
+#include "riemesh/primitives.h"
+#include "riemesh/vdb/io.h"
+#include "riemesh/vdb/level_set.h"
+#include "riemesh/vdb/metric_grid.h"
+#include "riemesh/vdb/nano.h"
+#include "riemesh/vdb/nifti.h"
+#include "riemesh/vdb/phantom.h"
+#include "riemesh/vdb/volume.h"
+
+#include <nifti2_io.h>
+
+#include <doctest/doctest.h>
+
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <limits>
+#include <string>
+
+using namespace riemesh::vdb;
+using openvdb::Coord;
+namespace fs = std::filesystem;
+
+namespace {
+
+struct TempDir {
+    fs::path path;
+    TempDir()
+    {
+        path = fs::temp_directory_path() / ("riemesh_io_test_" + std::to_string(::getpid()));
+        fs::create_directories(path);
+    }
+    ~TempDir() { fs::remove_all(path); }
+    std::string operator/(const std::string& name) const { return (path / name).string(); }
+};
+
+std::string messageOf(const std::function<void()>& f)
+{
+    try {
+        f();
+    } catch (const std::exception& e) {
+        return e.what();
+    }
+    return "(no exception)";
+}
+
+bool contains(const std::string& s, const std::string& part) { return s.find(part) != std::string::npos; }
+
+} // namespace
+
+TEST_CASE("nifti: Colin27 ch2.nii.gz reads as 181x217x181 voxels of 1 mm in scanner space")
+{
+    const std::string path = "/usr/share/mricron/templates/ch2.nii.gz";
+    if (!fs::exists(path)) {
+        MESSAGE("skipped: " << path << " is not installed (Debian mricron-data)");
+        return;
+    }
+    NiftiHeaderInfo info;
+    auto grid = readNifti(path, &info);
+    CHECK(info.dims == std::array<long long, 3>{181, 217, 181});
+    const auto box = grid->evalActiveVoxelBoundingBox();
+    CHECK(box.min() == Coord(0));
+    CHECK(box.max() == Coord(180, 216, 180));
+    CHECK(grid->activeVoxelCount() == openvdb::Index64(181) * 217 * 181);
+    const auto vs = grid->transform().voxelSize();
+    CHECK(vs[0] == doctest::Approx(1.0));
+    CHECK(vs[1] == doctest::Approx(1.0));
+    CHECK(vs[2] == doctest::Approx(1.0));
+    CHECK((info.transformSource == "sform" || info.transformSource == "qform"));
+    // The header's own index -> world matrix, applied by nifticlib, agrees with the grid's transform.
+    nifti_image* nim = nifti_image_read(path.c_str(), 0);
+    REQUIRE(nim);
+    const auto& M = info.transformSource == "sform" ? nim->sto_xyz : nim->qto_xyz;
+    for (const Coord c : {Coord(0, 0, 0), Coord(90, 108, 90), Coord(180, 0, 37)}) {
+        const openvdb::Vec3d w = grid->transform().indexToWorld(c);
+        for (int r = 0; r < 3; ++r)
+            CHECK(w[r] == doctest::Approx(M.m[r][0] * c.x() + M.m[r][1] * c.y() + M.m[r][2] * c.z() + M.m[r][3]));
+    }
+    nifti_image_free(nim);
+    // A head: dark air in the corner, bright tissue in the middle.
+    auto acc = grid->getConstAccessor();
+    CHECK(acc.getValue(Coord(2, 2, 2)) < 20);
+    double sum = 0;
+    for (int k = 80; k < 100; ++k)
+        for (int j = 98; j < 118; ++j)
+            for (int i = 80; i < 100; ++i) sum += acc.getValue(Coord(i, j, k));
+    CHECK(sum / 8000.0 > 40);
+}
+
+TEST_CASE("nifti: a file written with nifticlib reads back with its affine, slope/intercept and datatype")
+{
+    TempDir dir;
+    const std::string path = dir / "small.nii.gz";
+    const int64_t dims[8] = {3, 4, 5, 6, 1, 1, 1, 1};
+    nifti_image* nim = nifti_make_new_nim(dims, NIFTI_TYPE_INT16, 1);
+    REQUIRE(nim);
+    auto* data = static_cast<int16_t*>(nim->data);
+    for (int k = 0; k < 6; ++k)
+        for (int j = 0; j < 5; ++j)
+            for (int i = 0; i < 4; ++i) data[(k * 5 + j) * 4 + i] = int16_t(i + 10 * j + 100 * k);
+    nim->scl_slope = 0.5;
+    nim->scl_inter = -3.0;
+    // sform: spacing (2, 1, 3) mm with a 90 degree rotation about z and an offset.
+    nim->sform_code = NIFTI_XFORM_SCANNER_ANAT;
+    nim->qform_code = 0;
+    double S[4][4] = {{0, -1, 0, 10}, {2, 0, 0, -20}, {0, 0, 3, 5}, {0, 0, 0, 1}};
+    for (int r = 0; r < 4; ++r)
+        for (int c = 0; c < 4; ++c) nim->sto_xyz.m[r][c] = S[r][c];
+    REQUIRE(nifti_set_filenames(nim, path.c_str(), 0, 1) == 0);
+    nifti_image_write(nim);
+    nifti_image_free(nim);
+
+    NiftiHeaderInfo info;
+    auto grid = readNifti(path, &info);
+    CHECK(info.transformSource == "sform");
+    CHECK(info.datatype == NIFTI_TYPE_INT16);
+    CHECK(info.dims == std::array<long long, 3>{4, 5, 6});
+    auto acc = grid->getConstAccessor();
+    CHECK(acc.getValue(Coord(3, 2, 1)) == doctest::Approx(0.5 * (3 + 20 + 100) - 3.0));
+    CHECK(acc.getValue(Coord(0, 4, 5)) == doctest::Approx(0.5 * (40 + 500) - 3.0));
+    const openvdb::Vec3d w = grid->transform().indexToWorld(openvdb::Vec3d(1, 2, 3));
+    CHECK(w[0] == doctest::Approx(-2 + 10));
+    CHECK(w[1] == doctest::Approx(2 - 20));
+    CHECK(w[2] == doctest::Approx(9 + 5));
+    CHECK(grid->getGridClass() == openvdb::GRID_UNKNOWN);
+    // Through the facade: world box and a note saying which space.
+    const Volume v = Volume::read(path);
+    CHECK(contains(v.info().transformNote, "RAS"));
+    CHECK(v.info().dims[0] == 4);
+}
+
+TEST_CASE("vdb: round trip of an image, and double grids read as float")
+{
+    TempDir dir;
+    PhantomOptions o;
+    o.size = 20;
+    o.noise = 0.1;
+    const Phantom p = makePhantom(PhantomShape::Ball, o);
+    const std::string path = dir / "p.vdb";
+    writeVdb(path, {p.density, p.sdf});
+    auto density = readVdbImage(path);
+    CHECK(density->getName() == "density");
+    CHECK(gridClassName(*density) == "fog");
+    auto sdf = readVdbImage(path, "sdf");
+    CHECK(gridClassName(*sdf) == "levelset");
+    auto a = density->getConstAccessor();
+    for (auto it = p.density->cbeginValueOn(); it; ++it) CHECK(a.getValue(it.getCoord()) == *it);
+
+    auto d = openvdb::DoubleGrid::create(0.0);
+    d->setName("dbl");
+    d->getAccessor().setValue(Coord(1, 2, 3), 0.25);
+    d->getAccessor().setValue(Coord(2, 2, 3), 0.75);
+    d->getAccessor().setValue(Coord(2, 3, 4), 0.5);
+    writeVdb(dir / "d.vdb", {d});
+    auto f = readVdbImage(dir / "d.vdb");
+    CHECK(f->getConstAccessor().getValue(Coord(2, 2, 3)) == 0.75f);
+    CHECK(f->activeVoxelCount() == 3);
+}
+
+TEST_CASE("nvdb: image and metric survive the round trip through NanoVDB")
+{
+    TempDir dir;
+    PhantomOptions o;
+    o.size = 24;
+    const Phantom p = makePhantom(PhantomShape::CubeCavity, o);
+    const MetricGrids m = computeMetric(*p.density);
+    const std::string path = dir / "p.nvdb";
+    writeNvdb(path, *p.density, m.diag.get(), m.off.get());
+    const NanoFileGrids back = readNanoFile(path);
+    REQUIRE(back.image);
+    REQUIRE(back.metricDiag);
+    CHECK(back.image->getName() == "density");
+    CHECK(gridClassName(*back.image) == "fog");
+    CHECK(back.muMax >= m.muMax - 1e-6);
+    auto a = back.image->getConstAccessor();
+    for (auto it = p.density->cbeginValueOn(); it; ++it) CHECK(a.getValue(it.getCoord()) == *it);
+    auto md = back.metricDiag->getConstAccessor();
+    auto mo = back.metricOff->getConstAccessor();
+    std::size_t n = 0;
+    for (auto it = m.diag->cbeginValueOn(); it; ++it, ++n) {
+        CHECK(md.getValue(it.getCoord()) == *it);
+        CHECK(mo.getValue(it.getCoord()) == m.off->getConstAccessor().getValue(it.getCoord()));
+    }
+    CHECK(n == m.activeVoxels);
+    // In memory, the same grids for the core.
+    const riemesh::NanoVolume nv = toNanoVolume(*p.density, m.diag.get(), m.off.get());
+    REQUIRE(nv.metricDiag());
+    CHECK(nv.imageName() == "density");
+    CHECK(nv.imageClass() == "fog");
+}
+
+TEST_CASE("io: bad files are refused with a message naming the problem")
+{
+    TempDir dir;
+    initialize();
+    CHECK(contains(messageOf([&] { readVdbImage(dir / "missing.vdb"); }), "no such file"));
+    { std::ofstream(dir / "empty.vdb"); }
+    CHECK(contains(messageOf([&] { readVdbImage(dir / "empty.vdb"); }), "empty"));
+    { std::ofstream(dir / "text.vdb") << "hello, I am not a volume\n"; }
+    CHECK(contains(messageOf([&] { readVdbImage(dir / "text.vdb"); }), "not a VDB file"));
+
+    PhantomOptions o;
+    o.size = 24;
+    o.noise = 0.2;
+    const Phantom p = makePhantom(PhantomShape::Ball, o);
+    writeVdb(dir / "good.vdb", {p.density});
+    {
+        const auto size = fs::file_size(dir / "good.vdb");
+        std::ifstream in(dir / "good.vdb", std::ios::binary);
+        std::string bytes(size / 2, '\0');
+        in.read(bytes.data(), std::streamsize(bytes.size()));
+        std::ofstream(dir / "truncated.vdb", std::ios::binary) << bytes;
+    }
+    CHECK(contains(messageOf([&] { readVdbImage(dir / "truncated.vdb"); }), "truncated"));
+    CHECK(contains(messageOf([&] { readVdbImage(dir / "good.vdb", "nope"); }), "no grid named 'nope'"));
+
+    auto vec = openvdb::Vec3fGrid::create();
+    vec->setName("velocity");
+    vec->getAccessor().setValue(Coord(0), openvdb::Vec3f(1));
+    writeVdb(dir / "vector.vdb", {vec});
+    CHECK(contains(messageOf([&] { readVdbImage(dir / "vector.vdb"); }), "no scalar float or double grid"));
+    CHECK(contains(messageOf([&] { readVdbImage(dir / "vector.vdb", "velocity"); }), "not a scalar"));
+
+    auto empty = openvdb::FloatGrid::create();
+    empty->setName("nothing");
+    writeVdb(dir / "emptygrid.vdb", {empty});
+    CHECK(contains(messageOf([&] { readVdbImage(dir / "emptygrid.vdb"); }), "no active voxels"));
+
+    auto nan = p.density->deepCopy();
+    nan->getAccessor().setValue(Coord(3, 3, 3), std::numeric_limits<float>::quiet_NaN());
+    nan->getAccessor().setValue(Coord(4, 3, 3), std::numeric_limits<float>::infinity());
+    writeVdb(dir / "nan.vdb", {nan});
+    const std::string nanMessage = messageOf([&] { readVdbImage(dir / "nan.vdb"); });
+    CHECK(contains(nanMessage, "2 non-finite"));
+
+    CHECK(contains(messageOf([&] { readImage(dir / "image.png"); }), "unknown input extension"));
+    CHECK(contains(messageOf([&] { readNifti(dir / "text.vdb"); }), "NIfTI"));
+}
+
+TEST_CASE("io: a failed write leaves an existing file untouched and no temporary behind")
+{
+    TempDir dir;
+    const std::string target = dir / "out.txt";
+    { std::ofstream(target) << "precious"; }
+    CHECK_THROWS(writeFileAtomically(target, [](const std::string& temp) {
+        std::ofstream(temp) << "partial";
+        throw std::runtime_error("disk on fire");
+    }));
+    std::ifstream in(target);
+    std::string content;
+    in >> content;
+    CHECK(content == "precious");
+    CHECK(std::distance(fs::directory_iterator(dir.path), fs::directory_iterator()) == 1);
+    CHECK_THROWS_WITH(writeFileAtomically(dir / "no/such/folder/x.vdb", [](const std::string&) {}),
+                      doctest::Contains("does not exist"));
+}
+
+TEST_CASE("level set: a mesh becomes a 'surface' level set whose zero crossing is the mesh")
+{
+    const riemesh::Mesh sphere = riemesh::makeIcosphere(riemesh::Vec3(10, 10, 10), 6.0, 4);
+    auto xform = openvdb::math::Transform::createLinearTransform(0.5);
+    auto ls = meshToSurfaceLevelSet(sphere, *xform);
+    CHECK(ls->getName() == "surface");
+    CHECK(ls->getGridClass() == openvdb::GRID_LEVEL_SET);
+    CHECK(ls->voxelSize()[0] == doctest::Approx(0.5));
+    auto acc = ls->getConstAccessor();
+    // World distance: inside negative, a point 0.5 outside the sphere reads about +0.5.
+    CHECK(acc.getValue(xform->worldToIndexCellCentered(openvdb::Vec3d(10, 10, 10 + 5.5))) < 0);
+    CHECK(acc.getValue(xform->worldToIndexCellCentered(openvdb::Vec3d(10, 10, 16.5))) == doctest::Approx(0.5).epsilon(0.15));
+}
+
+TEST_CASE("accuracy: a mesh of the phantom's true surface is within a fraction of a voxel of its sdf")
+{
+    PhantomOptions o;
+    o.size = 40;
+    const Phantom p = makePhantom(PhantomShape::Ball, o);
+    const double r = 0.3 * o.size, c = 0.5 * (o.size - 1);
+    const riemesh::Mesh exact = riemesh::makeIcosphere(riemesh::Vec3(c, c, c), r, 5);
+    const SurfaceError e = surfaceError(exact, *p.sdf);
+    CHECK(e.meanVertexDistance < 0.02);
+    CHECK(e.hausdorff < 0.3);
+    CHECK(e.samples > 1000);
+    const riemesh::Mesh smaller = riemesh::makeIcosphere(riemesh::Vec3(c, c, c), r - 1.0, 5);
+    const SurfaceError e2 = surfaceError(smaller, *p.sdf);
+    CHECK(e2.meanVertexDistance == doctest::Approx(1.0).epsilon(0.05));
+    CHECK(e2.hausdorff == doctest::Approx(1.0).epsilon(0.15));
+}
