@@ -9,9 +9,10 @@
 // A short edge u-v whose endpoints share an outside neighbour w is not collapsed (it would pinch
 // the loop u-v-w). If one side of that loop holds only a few vertices (a dent or pimple of the
 // sampling, typically a valence-3 vertex) those are collapsed away and u-v collapses normally;
-// otherwise the loop is a real tunnel and goes to RegularityStats::tunnels for the topology step. On a mesh that is
-// already regular one call costs one length evaluation and one flip test per edge, with no
-// per-edge allocation.
+// otherwise the loop is a real tunnel and goes to RegularityStats::tunnels for the topology step.
+//
+// On a mesh that is already regular one call costs one length evaluation and one flip test per
+// edge, with no per-edge allocation.
 #include "riemesh/regularity.h"
 
 #include "riemesh/edge_ops.h"
