@@ -50,30 +50,40 @@ void computeForces(const Mesh& mesh, const ScalarImage& image, const ForceOption
         if (!(len > 0) || valence[i] == 0) continue;
         const Vec3 nrm = normal[i] / len;
 
+        // External: inflation/deflation toward I = iso along the normal. The signed distance to the
+        // isosurface is estimated as (I - iso)/|grad I| (a Newton step) unless a fixed contrast is given;
+        // the pull is stiff near the surface and saturates at externalLimit * delta.
+        const double value = image.value(x);
+        double distance; // estimated signed distance to the isosurface (world units), > 0 inside
+        if (options.contrast > 0) {
+            distance = delta * (value - options.iso) / options.contrast;
+        } else {
+            const double g = image.gradient(x).norm();
+            distance = (value - options.iso) / std::max(g, 1e-12 / delta);
+        }
+        const double limit = options.externalLimit * delta;
+        const double push = std::max(-limit, std::min(limit, options.externalWeight * sign * distance));
+        // How free the flight is: 0 on the isosurface, 1 where the push saturates.
+        const double freedom = limit > 0 ? std::abs(push) / limit : 0.0;
+
         // Internal: umbrella operator, split into tangential (sampling) and normal (curvature) parts.
         const Vec3 umbrella = neighbourSum[i] / double(valence[i]) - x;
         const double un = umbrella.dot(nrm);
-        Vec3 f = options.internalWeight * (umbrella - un * nrm) + options.curvatureWeight * un * nrm;
-
-        // External: inflation/deflation toward I = iso along the normal. The signed distance to the
-        // isosurface is estimated as (I - iso)/|grad I| (a Newton step) unless a fixed contrast is given;
-        // the push saturates at one delta.
-        const double value = image.value(x);
-        double s;
-        if (options.contrast > 0) {
-            s = (value - options.iso) / options.contrast;
-        } else {
-            const double g = image.gradient(x).norm();
-            s = (value - options.iso) / std::max(g * delta, 1e-12);
-        }
-        f += options.externalWeight * delta * clampUnit(sign * s) * nrm;
+        // Free-flight smoothing only where the curvature points along the motion: the parts of a
+        // moving front that would fold into a swallowtail (creases of a deflating box, concave parts of
+        // an inflating bubble). Elsewhere (a convex bubble inflating) it would only fight the push.
+        const bool folding = un * push > 0;
+        const double curvature = folding
+            ? options.curvatureWeight + freedom * (options.freeCurvatureWeight - options.curvatureWeight)
+            : options.curvatureWeight;
+        Vec3 f = options.internalWeight * (umbrella - un * nrm) + curvature * un * nrm + push * nrm;
 
         // Optional attraction toward high gradient magnitude, along the normal.
         if (options.gradientWeight != 0) {
             const double gp = image.gradient(x + gradientStep * nrm).norm();
             const double gm = image.gradient(x - gradientStep * nrm).norm();
             const double scale = std::max(gp, gm);
-            if (scale > 0) f += options.gradientWeight * delta * clampUnit((gp - gm) / scale) * nrm;
+            if (scale > 0) f += options.gradientWeight * limit * clampUnit((gp - gm) / scale) * nrm;
         }
         forces[i] = f;
     }

@@ -23,6 +23,7 @@ struct IterationStats {
     std::size_t vertices = 0;
     double meanKineticEnergy = 0;
     int splits = 0, collapses = 0, flips = 0, merges = 0, cuts = 0;
+    int removedComponents = 0; ///< specks left by cuts and deleted (see removeSmallComponents)
     double milliseconds = 0;
 };
 
@@ -80,6 +81,7 @@ private:
     std::vector<Vec3> mForces;
     StopReason mReason = StopReason::Running;
     int mLastTopologyEvent = 0;
+    int mLastCut = 0;
     void updateConvergence();
 };
 

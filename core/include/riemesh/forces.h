@@ -17,9 +17,13 @@ struct ForceOptions {
     double iso = 0.5;             ///< isovalue of the surface to recover (image intensity)
     double contrast = 0.0;        ///< intensity scale of (I - iso) for full push; 0 = automatic
     bool objectBrighter = true;   ///< the object is where I > iso (else where I < iso)
-    double externalWeight = 1.0;  ///< inflation/deflation strength (x delta)
+    double externalWeight = 1.0;  ///< stiffness of the pull toward the isosurface (force per unit of distance)
+    double externalLimit = 0.125; ///< largest inflation/deflation force (x delta); free flight then runs
+                                  ///< below vmax, leaving headroom for creases to catch up
     double internalWeight = 0.3;  ///< tangential umbrella (sampling regularity)
-    double curvatureWeight = 0.05;///< normal umbrella (smoothing, shrinks curved parts)
+    double curvatureWeight = 0.05;///< normal umbrella near the isosurface (smoothing; shrinks curved parts)
+    double freeCurvatureWeight = 0.6; ///< normal umbrella in free flight (far from the isosurface), where
+                                      ///< the image says nothing and creases must not fold
     double gradientWeight = 0.0;  ///< attraction toward high |grad I| along the normal
 };
 

@@ -75,4 +75,10 @@ struct TopologyOptions {
 TopologyStats resolveTopology(Mesh& mesh, const std::vector<CollisionPair>& collisions,
                               const std::vector<TunnelCandidate>& tunnels, const TopologyOptions& options = {});
 
+/// Deletes every component with fewer than `minVertices` vertices or enclosing less than
+/// `minVolume` (world units cubed): the specks a deflating model leaves behind after a cut, which
+/// have nothing to hold on to and would shrink into degenerate faces. Returns how many went.
+/// No garbage_collection().
+int removeSmallComponents(Mesh& mesh, std::size_t minVertices, double minVolume);
+
 } // namespace riemesh

@@ -1,0 +1,156 @@
+// core_bench: speed of the portable core on analytic images (no OpenVDB).
+//
+//   core_bench [--quick]
+//
+// 1. Cost per iteration against the vertex count (1k, 5k, 20k, 80k vertices on a converged
+//    sphere): one full iteration = forces, integration, regularity, collision, topology.
+// 2. Full runs: a ball and the paper's phantom (a cube with a spherical cavity opening through a
+//    hole in one face), Euclidean and Riemannian (an analytic metric that stretches lengths across
+//    the contour), at a few resolutions: vertices, iterations, ms per iteration, total seconds,
+//    topology.
+// Prints one table per part; --quick runs a small subset (CI).
+#include "riemesh/evolution.h"
+#include "riemesh/primitives.h"
+
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <cstring>
+#include <string>
+
+using namespace riemesh;
+
+namespace {
+
+double ballSdf(const Vec3& x, const Vec3& c, double r) { return r - (x - c).norm(); }
+
+/// The paper's phantom in a 100^3 image (voxel units): a cube [20,80]^3 with a spherical cavity of
+/// radius 20 at its centre, opened to the outside by a cylindrical hole of radius 4 along +z.
+/// sdf > 0 inside the solid.
+double phantomSdf(const Vec3& x, double scale)
+{
+    const Vec3 p = x / scale;
+    const Vec3 c(50, 50, 50);
+    const Vec3 d = (p - c).cwiseAbs() - Vec3::Constant(30);
+    const double outside = d.cwiseMax(0.0).norm() + std::min(d.maxCoeff(), 0.0);
+    const double cube = -outside;
+    const double cavity = (p - c).norm() - 20;
+    const double hole = p.z() > 50 ? std::hypot(p.x() - 50, p.y() - 50) - 4 : 1e9;
+    return scale * std::min({cube, cavity, hole});
+}
+
+struct Scene {
+    std::string name;
+    std::function<double(const Vec3&)> sdf;
+    Box3 bounds;
+};
+
+FunctionImage fog(const Scene& s)
+{
+    auto sdf = s.sdf;
+    return FunctionImage([sdf](const Vec3& x) { return 0.5 + 0.5 * std::tanh(sdf(x)); }, s.bounds, 1.0);
+}
+
+/// An analytic stand-in for the structure-tensor metric: lengths across the contour (along the
+/// sdf gradient) are multiplied by up to sqrt(muMax) within a couple of voxels of the surface.
+FunctionMetric contourMetric(std::function<double(const Vec3&)> sdf, double muMax)
+{
+    return FunctionMetric(
+        [sdf, muMax](const Vec3& x) {
+            const double d = sdf(x);
+            const double w = std::exp(-d * d / 8.0);
+            if (w < 1e-3) return Mat3(Mat3::Identity());
+            Vec3 g;
+            for (int a = 0; a < 3; ++a) {
+                Vec3 e = Vec3::Zero();
+                e[a] = 0.5;
+                g[a] = sdf(x + e) - sdf(x - e);
+            }
+            const double n = g.norm();
+            if (!(n > 0)) return Mat3(Mat3::Identity());
+            g /= n;
+            return Mat3(Mat3::Identity() + (muMax - 1.0) * w * g * g.transpose());
+        },
+        muMax);
+}
+
+double now()
+{
+    return std::chrono::duration<double>(std::chrono::steady_clock::now().time_since_epoch()).count();
+}
+
+void scaling(bool quick)
+{
+    std::printf("\n# cost per iteration against vertex count (ball image, Euclidean, converged sphere)\n");
+    std::printf("%10s %10s %12s %14s\n", "target", "vertices", "ms/iter", "us/iter/vertex");
+    const int targets[] = {1000, 5000, 20000, 80000};
+    for (int target : targets) {
+        if (quick && target > 5000) break;
+        const double radius = 30;
+        // Area per vertex on a regular mesh with edges ~1.6 delta: ~ 2.2 delta^2.
+        const double delta = std::sqrt(4 * M_PI * radius * radius / (2.2 * target));
+        Scene s{"ball", [radius](const Vec3& x) { return ballSdf(x, Vec3::Zero(), radius); },
+                Box3(Vec3::Constant(-40), Vec3::Constant(40))};
+        const auto image = fog(s);
+        EuclideanMetric metric;
+        int sub = 0;
+        while (20.0 * std::pow(4.0, sub) < 2.0 * target && sub < 8) ++sub;
+        Mesh mesh = makeIcosphere(Vec3::Zero(), radius, sub);
+        EvolutionOptions o;
+        o.delta = delta;
+        o.maxIterations = 1000000;
+        Evolution evolution(mesh, image, metric, o);
+        for (int i = 0; i < 40; ++i) evolution.step(); // settle the sampling
+        const int n = 50;
+        const double t0 = now();
+        for (int i = 0; i < n; ++i) evolution.step();
+        const double ms = (now() - t0) * 1000.0 / n;
+        std::printf("%10d %10zu %12.3f %14.4f\n", target, mesh.n_vertices(), ms, 1000.0 * ms / mesh.n_vertices());
+    }
+}
+
+void fullRuns(bool quick)
+{
+    std::printf("\n# full runs from the default initialisation (box deflating)\n");
+    std::printf("%-10s %-11s %6s %6s %9s %7s %9s %9s %5s %5s %-10s\n", "scene", "metric", "scale", "delta",
+                "vertices", "iters", "ms/iter", "seconds", "comp", "genus", "stop");
+    std::vector<double> scales = quick ? std::vector<double>{1.0} : std::vector<double>{1.0, 2.0};
+    for (double scale : scales) {
+        std::vector<Scene> scenes = {
+            {"ball", [scale](const Vec3& x) { return ballSdf(x, Vec3::Constant(50 * scale), 30 * scale); },
+             Box3(Vec3::Zero(), Vec3::Constant(100 * scale))},
+            {"phantom", [scale](const Vec3& x) { return phantomSdf(x, scale); },
+             Box3(Vec3::Zero(), Vec3::Constant(100 * scale))},
+        };
+        for (const auto& s : scenes) {
+            const auto image = fog(s);
+            for (int riemannian = 0; riemannian < 2; ++riemannian) {
+                EvolutionOptions o;
+                o.delta = riemannian ? 3.0 * scale : 1.5 * scale;
+                o.maxIterations = 3000;
+                EuclideanMetric euclidean;
+                auto contour = contourMetric(s.sdf, 9.0);
+                const MetricField& metric = riemannian ? static_cast<const MetricField&>(contour) : euclidean;
+                Mesh mesh = makeInitialBox(image, 2.0 * o.delta);
+                const auto stats = evolve(mesh, image, metric, o);
+                const auto t = topologyOf(mesh);
+                std::printf("%-10s %-11s %6.0f %6.2f %9zu %7zu %9.3f %9.3f %5d %5d %-10s\n", s.name.c_str(),
+                            riemannian ? "riemannian" : "euclidean", scale, o.delta, t.vertices,
+                            stats.iterations.size(), 1000.0 * stats.seconds / std::max<size_t>(1, stats.iterations.size()),
+                            stats.seconds, t.components, t.genus, toString(stats.reason));
+                std::fflush(stdout);
+            }
+        }
+    }
+}
+
+} // namespace
+
+int main(int argc, char** argv)
+{
+    const bool quick = argc > 1 && std::strcmp(argv[1], "--quick") == 0;
+    std::printf("riemesh core_bench%s (one thread)\n", quick ? " --quick" : "");
+    scaling(quick);
+    fullRuns(quick);
+    return 0;
+}

@@ -1,0 +1,189 @@
+#include "riemesh/evolution.h"
+
+#include "riemesh/collision.h"
+#include "riemesh/primitives.h"
+#include "riemesh/regularity.h"
+#include "riemesh/topology.h"
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <stdexcept>
+
+namespace riemesh {
+
+const char* toString(StopReason reason)
+{
+    switch (reason) {
+    case StopReason::Running: return "running";
+    case StopReason::Converged: return "converged";
+    case StopReason::IterationCap: return "iteration-cap";
+    case StopReason::Interrupted: return "interrupted";
+    case StopReason::VertexCap: return "vertex-cap";
+    }
+    return "unknown";
+}
+
+namespace {
+
+void validate(const EvolutionOptions& o)
+{
+    if (!(o.delta > 0) || !std::isfinite(o.delta)) throw std::invalid_argument("evolution: delta must be > 0");
+    if (!(o.zeta >= 2.0) || !std::isfinite(o.zeta)) throw std::invalid_argument("evolution: zeta must be >= 2");
+    if (!(o.vmaxFraction > 0 && o.vmaxFraction <= 1)) throw std::invalid_argument("evolution: vmaxFraction must be in (0, 1]");
+    if (!(o.mass > 0) || !(o.damping >= 0)) throw std::invalid_argument("evolution: mass must be > 0 and damping >= 0");
+    if (o.maxIterations < 0 || o.convergenceWindow < 1) throw std::invalid_argument("evolution: bad iteration limits");
+}
+
+} // namespace
+
+Evolution::Evolution(Mesh& mesh, const ScalarImage& image, const MetricField& metric, const EvolutionOptions& options)
+    : mMesh(mesh), mImage(image), mMetric(metric), mOptions(options)
+{
+    validate(mOptions);
+    prepareMesh(mMesh);
+}
+
+void Evolution::setOptions(const EvolutionOptions& options)
+{
+    validate(options);
+    mOptions = options;
+    if (mReason == StopReason::Converged || mReason == StopReason::IterationCap) mReason = StopReason::Running;
+    mLastTopologyEvent = int(mHistory.size());
+}
+
+IterationStats Evolution::step()
+{
+    IterationStats it;
+    if (done()) return it;
+    const auto start = std::chrono::steady_clock::now();
+    const EvolutionOptions& o = mOptions;
+    const double vmax = o.vmaxFraction * o.delta;
+
+    computeForces(mMesh, mImage, o.forces, o.delta, mForces);
+    IntegrationOptions io;
+    io.mass = o.mass;
+    io.damping = o.damping;
+    io.vmax = vmax;
+    const IntegrationStats is = integrate(mMesh, mForces, io);
+
+    RegularityOptions ro;
+    ro.delta = o.delta;
+    ro.zeta = o.zeta;
+    const RegularityStats rs = enforceRegularity(mMesh, mMetric, ro);
+
+    CollisionOptions co;
+    co.delta = o.delta;
+    co.zeta = o.zeta;
+    co.vmax = vmax;
+    const auto collisions = findCollisions(mMesh, mMetric, co);
+    TopologyStats ts;
+    if (!collisions.empty() || !rs.tunnels.empty()) {
+        TopologyOptions to;
+        to.neighbourhoodRadius = co.neighbourhoodFactor * collisionRadius(mMetric, co);
+        ts = resolveTopology(mMesh, collisions, rs.tunnels, to);
+    }
+    const int iteration = int(mHistory.size()) + 1;
+    if (ts.cuts) mLastCut = iteration;
+    // Specks cut off from the surface have nothing to hold on to and shrink into degenerate faces:
+    // remove components smaller than a few delta-sized triangles. Specks come only from cuts, so the
+    // O(n) component pass runs only for a while after one.
+    int removed = 0;
+    if (mLastCut > 0 && iteration - mLastCut <= 60)
+        removed = removeSmallComponents(mMesh, 6, 0.5 * o.delta * o.delta * o.delta);
+
+    if (rs.collapses || ts.merges || ts.cuts || removed) mMesh.garbage_collection();
+
+    it.iteration = iteration;
+    it.removedComponents = removed;
+    it.vertices = mMesh.n_vertices();
+    it.meanKineticEnergy = is.meanKineticEnergy;
+    it.splits = rs.splits;
+    it.collapses = rs.collapses;
+    it.flips = rs.flips;
+    it.merges = ts.merges;
+    it.cuts = ts.cuts;
+    it.milliseconds = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
+    mHistory.push_back(it);
+    if (ts.merges || ts.cuts) mLastTopologyEvent = it.iteration;
+
+    updateConvergence();
+    if (o.progress && !o.progress(it) && mReason == StopReason::Running) mReason = StopReason::Interrupted;
+    return it;
+}
+
+void Evolution::updateConvergence()
+{
+    const EvolutionOptions& o = mOptions;
+    const int n = int(mHistory.size());
+    if (mMesh.n_vertices() > o.maxVertices) { mReason = StopReason::VertexCap; return; }
+    if (n >= o.maxIterations) { mReason = StopReason::IterationCap; return; }
+    const int w = o.convergenceWindow;
+    if (n < std::max(o.minIterations, 2 * w)) return;
+    const double scale = o.delta * o.delta;
+    // Mean and spread of the relative kinetic energy (KE / delta^2) over the last two windows.
+    double recent = 0, previous = 0, peak = 0;
+    for (int i = n - w; i < n; ++i) {
+        recent += mHistory[i].meanKineticEnergy / scale;
+        peak = std::max(peak, mHistory[i].meanKineticEnergy / scale);
+    }
+    for (int i = n - 2 * w; i < n - w; ++i) previous += mHistory[i].meanKineticEnergy / scale;
+    recent /= w;
+    previous /= w;
+    if (peak < o.energyThreshold) { mReason = StopReason::Converged; return; }
+    // Stabilised: low energy (well below free-flight speed), no topology change and a nearly constant
+    // vertex count over the last window, and energy no longer decreasing.
+    const double moving = 0.5 * std::pow(0.1 * o.vmaxFraction, 2); // mean speed < 10% of vmax
+    const bool quiet = recent < moving && n - mLastTopologyEvent >= w;
+    const double dv = std::abs(double(mHistory[n - 1].vertices) - double(mHistory[n - w].vertices));
+    const bool steadyCount = dv <= 0.01 * double(mHistory[n - 1].vertices);
+    const bool flat = std::abs(recent - previous) <= o.relativeChange * std::max(previous, 1e-30) || recent > previous;
+    if (quiet && steadyCount && flat) mReason = StopReason::Converged;
+}
+
+EvolutionStats evolve(Mesh& mesh, const ScalarImage& image, const MetricField& metric, const EvolutionOptions& options)
+{
+    const auto start = std::chrono::steady_clock::now();
+    Evolution evolution(mesh, image, metric, options);
+    while (!evolution.done()) evolution.step();
+    EvolutionStats stats;
+    stats.iterations = evolution.history();
+    stats.reason = evolution.reason();
+    for (const auto& it : stats.iterations) {
+        stats.splits += it.splits;
+        stats.collapses += it.collapses;
+        stats.flips += it.flips;
+        stats.merges += it.merges;
+        stats.cuts += it.cuts;
+    }
+    stats.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+    return stats;
+}
+
+Mesh makeInitialBox(const ScalarImage& image, double edgeLength)
+{
+    const Box3 b = image.bounds();
+    const Vec3 inset = Vec3::Constant(image.voxelSize());
+    const Vec3 lo = b.min() + inset, hi = b.max() - inset;
+    if (!(hi.array() > lo.array()).all())
+        throw std::invalid_argument("makeInitialBox: the image is too small for an initial box (needs > 2 voxels per axis)");
+    return makeBox(lo, hi, edgeLength);
+}
+
+Mesh makeBubbles(const std::vector<std::pair<Vec3, double>>& spheres, double edgeLength)
+{
+    if (spheres.empty()) throw std::invalid_argument("makeBubbles: no sphere given");
+    if (!(edgeLength > 0)) throw std::invalid_argument("makeBubbles: edge length must be > 0");
+    Mesh mesh;
+    prepareMesh(mesh);
+    for (const auto& [center, radius] : spheres) {
+        if (!(radius > 0)) throw std::invalid_argument("makeBubbles: radius must be > 0");
+        // icosphere edge ~ 1.1 * radius / 2^s
+        int s = 0;
+        while (s < 6 && 1.1 * radius / double(1 << s) > edgeLength) ++s;
+        appendMesh(mesh, makeIcosphere(center, radius, s));
+    }
+    return mesh;
+}
+
+} // namespace riemesh

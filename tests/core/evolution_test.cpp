@@ -1,0 +1,210 @@
+// End-to-end scenarios of the model on analytic images (issue: core). Each checks the mesh
+// invariants at the end (and the topology the scenario promises); the per-iteration invariant check
+// runs through the progress callback.
+#include "mesh_invariants.h"
+#include "riemesh/evolution.h"
+#include "riemesh/primitives.h"
+
+#include <doctest/doctest.h>
+
+#include <cmath>
+
+using namespace riemesh;
+
+namespace {
+
+/// A fog-like analytic image: 1 inside, 0 outside, a smooth (tanh) transition one voxel wide
+/// centred on the surface sdf = 0 (sdf > 0 inside). The isosurface I = 0.5 is exactly sdf = 0.
+FunctionImage fogImage(std::function<double(const Vec3&)> sdf, const Box3& bounds)
+{
+    return FunctionImage([sdf](const Vec3& x) { return 0.5 + 0.5 * std::tanh(sdf(x)); }, bounds, 1.0);
+}
+
+double ballSdf(const Vec3& x, const Vec3& c, double r) { return r - (x - c).norm(); }
+
+double torusSdf(const Vec3& x, double major, double minor)
+{
+    const double q = std::hypot(x.x(), x.y()) - major;
+    return minor - std::hypot(q, x.z());
+}
+
+EvolutionOptions baseOptions(double delta)
+{
+    EvolutionOptions o;
+    o.delta = delta;
+    o.maxIterations = 1500;
+    return o;
+}
+
+/// Runs to the end checking the invariants every `every` iterations; returns the stats.
+EvolutionStats runChecked(Mesh& mesh, const ScalarImage& image, const MetricField& metric, EvolutionOptions o,
+                          int every = 10, bool allowEmpty = false)
+{
+    int failures = 0;
+    o.progress = [&](const IterationStats& it) {
+        if (it.iteration % every == 0 && !(allowEmpty && mesh.n_faces() == 0)) {
+            const auto report = testing::checkInvariants(mesh);
+            if (!report.ok() && failures++ == 0) {
+                INFO("iteration " << it.iteration << ": " << report.text());
+                CHECK(report.ok());
+            }
+        }
+        return failures == 0;
+    };
+    const auto stats = evolve(mesh, image, metric, o);
+    REQUIRE(failures == 0);
+    if (!(allowEmpty && mesh.n_faces() == 0)) REQUIRE_MESH_OK(mesh);
+    return stats;
+}
+
+} // namespace
+
+TEST_CASE("evolution: a box deflating onto a ball converges to the sphere within 0.1 voxel")
+{
+    const double radius = 8.0;
+    const auto image = fogImage([&](const Vec3& x) { return ballSdf(x, Vec3::Zero(), radius); },
+                                Box3(Vec3::Constant(-12), Vec3::Constant(12)));
+    Mesh mesh = makeInitialBox(image, 2.0);
+    EuclideanMetric metric;
+    const auto stats = runChecked(mesh, image, metric, baseOptions(1.0));
+    CHECK(std::string(toString(stats.reason)) == "converged");
+    const auto t = topologyOf(mesh);
+    CHECK(t.components == 1);
+    CHECK(t.genus == 0);
+    double sum = 0;
+    for (auto v : mesh.vertices()) sum += std::abs(position(mesh, v).norm() - radius);
+    const double mean = sum / double(mesh.n_vertices());
+    INFO("mean distance " << mean << " vertices " << mesh.n_vertices() << " iterations " << stats.iterations.size());
+    CHECK(mean < 0.1);
+}
+
+TEST_CASE("evolution: a box deflating onto two separated balls pinches into two components")
+{
+    const auto image = fogImage(
+        [](const Vec3& x) { return std::max(ballSdf(x, Vec3(-7, 0, 0), 5), ballSdf(x, Vec3(7, 0, 0), 5)); },
+        Box3(Vec3(-15, -8, -8), Vec3(15, 8, 8)));
+    Mesh mesh = makeInitialBox(image, 2.0);
+    EuclideanMetric metric;
+    const auto stats = runChecked(mesh, image, metric, baseOptions(1.0));
+    const auto t = topologyOf(mesh);
+    INFO("merges " << stats.merges << " cuts " << stats.cuts << " iterations " << stats.iterations.size());
+    CHECK(t.components == 2);
+    CHECK(t.genus == 0);
+    CHECK(stats.cuts >= 1);
+}
+
+TEST_CASE("evolution: a box deflating onto a torus ends with genus 1")
+{
+    const auto image = fogImage([](const Vec3& x) { return torusSdf(x, 8, 3); },
+                                Box3(Vec3(-13, -13, -6), Vec3(13, 13, 6)));
+    Mesh mesh = makeInitialBox(image, 2.0);
+    EuclideanMetric metric;
+    const auto stats = runChecked(mesh, image, metric, baseOptions(1.0));
+    const auto t = topologyOf(mesh);
+    INFO("merges " << stats.merges << " cuts " << stats.cuts);
+    CHECK(t.components == 1);
+    CHECK(t.genus == 1);
+}
+
+TEST_CASE("evolution: two bubbles inflating inside one ball merge into one component")
+{
+    const auto image = fogImage([](const Vec3& x) { return ballSdf(x, Vec3::Zero(), 9); },
+                                Box3(Vec3::Constant(-12), Vec3::Constant(12)));
+    Mesh mesh = makeBubbles({{Vec3(-4, 0, 0), 2.0}, {Vec3(4, 0, 0), 2.0}}, 1.5);
+    REQUIRE(topologyOf(mesh).components == 2);
+    EuclideanMetric metric;
+    const auto stats = runChecked(mesh, image, metric, baseOptions(1.0));
+    const auto t = topologyOf(mesh);
+    CHECK(stats.merges >= 1);
+    CHECK(t.components == 1);
+    CHECK(t.genus == 0);
+}
+
+TEST_CASE("evolution: a bubble inflating inside a torus tube closes on itself into genus 1")
+{
+    const auto image = fogImage([](const Vec3& x) { return torusSdf(x, 8, 3); },
+                                Box3(Vec3(-13, -13, -6), Vec3(13, 13, 6)));
+    Mesh mesh = makeBubbles({{Vec3(8, 0, 0), 2.0}}, 1.5);
+    EuclideanMetric metric;
+    const auto stats = runChecked(mesh, image, metric, baseOptions(1.0));
+    const auto t = topologyOf(mesh);
+    INFO("merges " << stats.merges << " cuts " << stats.cuts);
+    CHECK(t.components == 1);
+    CHECK(t.genus == 1);
+}
+
+TEST_CASE("evolution: a coarse Euclidean model punches through a thin plate, an anisotropic metric keeps genus 0")
+{
+    // A plate 3 voxels thick (|z| < 1.5), 40 x 40 voxels wide: wide enough that its two faces are
+    // far apart along the mesh (around the rim) compared with the coarse model's collision radius.
+    auto plate = [](const Vec3& x) {
+        return std::min({1.5 - std::abs(x.z()), 20 - std::abs(x.x()), 20 - std::abs(x.y())});
+    };
+    const auto image = fogImage(plate, Box3(Vec3(-24, -24, -8), Vec3(24, 24, 8)));
+    EvolutionOptions o = baseOptions(3.0); // coarse: collision radius ~7 voxels > 3 voxels of thickness
+    o.maxIterations = 400;
+    auto meanPlateDistance = [&](const Mesh& mesh) {
+        double sum = 0;
+        for (auto v : mesh.vertices()) sum += std::abs(plate(position(mesh, v)));
+        return mesh.n_vertices() ? sum / double(mesh.n_vertices()) : 1e9;
+    };
+    {
+        // The two sheets come within the collision radius across the plate: they are merged through
+        // it and the plate is lost (holes, or nothing left at all).
+        Mesh mesh = makeInitialBox(image, 4.0);
+        EuclideanMetric euclidean;
+        const auto stats = runChecked(mesh, image, euclidean, o, 10, /*allowEmpty=*/true);
+        const auto t = topologyOf(mesh);
+        INFO("euclidean merges " << stats.merges << " genus " << t.genus << " components " << t.components);
+        CHECK(stats.merges > 0);
+        const bool recovered = t.components == 1 && t.genus == 0 && meanPlateDistance(mesh) < 0.5;
+        CHECK_FALSE(recovered);
+    }
+    {
+        // Overestimate lengths across the plate (along z) by 3: d_R across = 9 > lambda*zeta*delta.
+        Mat3 g = Mat3::Identity();
+        g(2, 2) = 9.0;
+        ConstantMetric anisotropic(g);
+        Mesh mesh = makeInitialBox(image, 4.0);
+        const auto stats = runChecked(mesh, image, anisotropic, o);
+        const auto t = topologyOf(mesh);
+        INFO("riemannian merges " << stats.merges << " mean distance " << meanPlateDistance(mesh));
+        CHECK(stats.merges < 10); // a few transient merges near the box corners, undone by cuts
+        CHECK(t.genus == 0);
+        CHECK(t.components == 1);
+        CHECK(meanPlateDistance(mesh) < 0.5);
+    }
+}
+
+TEST_CASE("evolution: Evolution::step advances one iteration and can be interrupted")
+{
+    const auto image = fogImage([](const Vec3& x) { return ballSdf(x, Vec3::Zero(), 6); },
+                                Box3(Vec3::Constant(-10), Vec3::Constant(10)));
+    Mesh mesh = makeInitialBox(image, 2.0);
+    EuclideanMetric metric;
+    EvolutionOptions o = baseOptions(1.0);
+    int calls = 0;
+    o.progress = [&](const IterationStats&) { return ++calls < 5; };
+    Evolution evolution(mesh, image, metric, o);
+    const auto first = evolution.step();
+    CHECK(first.iteration == 1);
+    CHECK(first.vertices == mesh.n_vertices());
+    while (!evolution.done()) evolution.step();
+    CHECK(std::string(toString(evolution.reason())) == "interrupted");
+    CHECK(evolution.history().size() == 5);
+    CHECK_MESH_OK(mesh);
+}
+
+TEST_CASE("evolution: nonsense options are refused")
+{
+    const auto image = fogImage([](const Vec3& x) { return ballSdf(x, Vec3::Zero(), 6); },
+                                Box3(Vec3::Constant(-10), Vec3::Constant(10)));
+    Mesh mesh = makeInitialBox(image, 2.0);
+    EuclideanMetric metric;
+    EvolutionOptions o;
+    o.delta = -1;
+    CHECK_THROWS_AS(Evolution(mesh, image, metric, o), std::invalid_argument);
+    o.delta = 1;
+    o.zeta = 0.5;
+    CHECK_THROWS_AS(Evolution(mesh, image, metric, o), std::invalid_argument);
+}
