@@ -1,0 +1,149 @@
+// Browser test of the riemesh page: serves build-wasm/web/ on 127.0.0.1, opens it in Debian's headless
+// Chromium (playwright-core, /usr/bin/chromium, a fresh profile), waits for the model to converge
+// ("riemesh: converged iterations=N vertices=V seconds=S" on the console), checks there were no page
+// errors, screenshots the page and checks the canvas is drawn (many colours, not just background),
+// then exercises the play/pause control through the keyboard and the JS API.
+//
+// Usage: node tests/web/page_test.mjs [WEB_DIR] [OUT_DIR]
+//   WEB_DIR defaults to build-wasm/web, OUT_DIR (screenshots, console log) to build-wasm/web-test.
+import { chromium } from 'playwright-core';
+import fs from 'node:fs';
+import http from 'node:http';
+import os from 'node:os';
+import path from 'node:path';
+import { fileURLToPath } from 'node:url';
+
+const top = path.resolve(path.dirname(fileURLToPath(import.meta.url)), '../..');
+const webDir = path.resolve(process.argv[2] || path.join(top, 'build-wasm/web'));
+const outDir = path.resolve(process.argv[3] || path.join(top, 'build-wasm/web-test'));
+const chromiumPath = process.env.RIEMESH_CHROMIUM || '/usr/bin/chromium';
+const convergeTimeoutMs = Number(process.env.RIEMESH_WEB_TIMEOUT_MS || 240000);
+fs.mkdirSync(outDir, { recursive: true });
+
+const types = { '.html': 'text/html', '.js': 'text/javascript', '.wasm': 'application/wasm',
+                '.nvdb': 'application/octet-stream', '.png': 'image/png' };
+function serve(dir) {
+  const server = http.createServer((req, res) => {
+    const url = new URL(req.url, 'http://127.0.0.1');
+    const rel = decodeURIComponent(url.pathname === '/' ? '/index.html' : url.pathname);
+    const file = path.join(dir, path.normalize(rel));
+    if (!file.startsWith(dir) || !fs.existsSync(file) || !fs.statSync(file).isFile()) {
+      res.writeHead(404);
+      res.end('not found');
+      return;
+    }
+    res.writeHead(200, { 'Content-Type': types[path.extname(file)] || 'application/octet-stream' });
+    fs.createReadStream(file).pipe(res);
+  });
+  return new Promise((resolve) => server.listen(0, '127.0.0.1', () => resolve(server)));
+}
+
+const results = [];
+function check(name, ok, detail = '') {
+  results.push({ name, ok });
+  console.log(`${ok ? 'ok  ' : 'FAIL'} ${name}${detail ? ': ' + detail : ''}`);
+}
+const sleep = (ms) => new Promise((r) => setTimeout(r, ms));
+
+// Distinct colours and the share of pixels that differ from the background, read from a screenshot
+// (a PNG decoded by the browser itself in a scratch page: no extra npm dependency).
+async function analyse(context, png, clip) {
+  const scratch = await context.newPage();
+  const stats = await scratch.evaluate(async ({ b64, clip }) => {
+    const img = new Image();
+    img.src = 'data:image/png;base64,' + b64;
+    await img.decode();
+    const c = document.createElement('canvas');
+    c.width = img.width;
+    c.height = img.height;
+    const g = c.getContext('2d');
+    g.drawImage(img, 0, 0);
+    const { data } = g.getImageData(clip.x, clip.y, clip.width, clip.height);
+    const colours = new Set();
+    const bg = [data[0], data[1], data[2]];
+    let differ = 0;
+    for (let i = 0; i < data.length; i += 4) {
+      colours.add((data[i] << 16) | (data[i + 1] << 8) | data[i + 2]);
+      if (Math.abs(data[i] - bg[0]) + Math.abs(data[i + 1] - bg[1]) + Math.abs(data[i + 2] - bg[2]) > 24) differ++;
+    }
+    return { colours: colours.size, drawn: differ / (data.length / 4) };
+  }, { b64: png.toString('base64'), clip });
+  await scratch.close();
+  return stats;
+}
+
+const server = await serve(webDir);
+const url = `http://127.0.0.1:${server.address().port}/`;
+const profile = fs.mkdtempSync(path.join(os.tmpdir(), 'riemesh-chromium-'));
+let context;
+const consoleLines = [];
+const pageErrors = [];
+try {
+  context = await chromium.launchPersistentContext(profile, {
+    executablePath: chromiumPath,
+    headless: true,
+    viewport: { width: 1280, height: 800 },
+    args: ['--no-sandbox', '--enable-unsafe-swiftshader', '--disable-background-networking'],
+  });
+  const page = context.pages()[0] || (await context.newPage());
+  page.on('console', (m) => {
+    consoleLines.push(`[${m.type()}] ${m.text()}`);
+    if (m.type() === 'error') pageErrors.push('console.error: ' + m.text());
+  });
+  page.on('pageerror', (e) => pageErrors.push('pageerror: ' + e.message));
+  page.on('crash', () => pageErrors.push('page crashed'));
+
+  const started = Date.now();
+  await page.goto(url);
+  const converged = /^riemesh: converged iterations=(\d+) vertices=(\d+) seconds=([0-9.]+)/;
+  let line;
+  while (!line && Date.now() - started < convergeTimeoutMs && pageErrors.length === 0) {
+    line = consoleLines.map((l) => l.replace(/^\[\w+\] /, '')).find((l) => converged.test(l));
+    if (consoleLines.some((l) => l.includes('riemesh: stopped'))) break;
+    if (!line) await sleep(250);
+  }
+  const wall = (Date.now() - started) / 1000;
+  check('the model converges in the page', !!line, line ? `${line} (page open ${wall.toFixed(1)} s)` : `no converged line after ${wall.toFixed(0)} s`);
+  const loaded = consoleLines.find((l) => l.includes('riemesh: loaded'));
+  check('the page opens on the demo volume', !!loaded, loaded || consoleLines.filter((l) => l.includes('riemesh')).join(' | '));
+
+  await sleep(500); // a few frames with the final mesh
+  const shot = await page.screenshot({ path: path.join(outDir, 'page.png') });
+  // The 3D view right of the ImGui panel.
+  const view = await analyse(context, shot, { x: 400, y: 40, width: 860, height: 740 });
+  check('the canvas is drawn (many colours, mesh covers part of the view)', view.colours > 64 && view.drawn > 0.05,
+        `${view.colours} colours, ${(100 * view.drawn).toFixed(1)}% of the view differs from the background`);
+
+  // Control: space pauses (keyboard through GLFW and ImGui into the app), reset restarts from the box,
+  // space plays again.
+  const state = () => page.evaluate(() => window.riemesh.state());
+  await page.mouse.click(1200, 760); // focus the canvas (a click without drag does not move the camera)
+  await page.keyboard.press('Space');
+  await sleep(300);
+  const paused = await state();
+  await page.evaluate(() => window.riemesh.reset());
+  await sleep(800);
+  const afterReset = await state();
+  check('space pauses, and a paused model stays at its iteration after reset',
+        paused.playing === false && afterReset.iteration === 0 && afterReset.state === 'paused',
+        JSON.stringify({ paused: paused.state, afterReset: afterReset.iteration }));
+  await page.keyboard.press('Space');
+  await sleep(1500);
+  const playing = await state();
+  check('space plays again: the model evolves', playing.playing === true && playing.iteration > 3,
+        `iteration ${playing.iteration}, ${playing.vertices} vertices`);
+  await page.screenshot({ path: path.join(outDir, 'page-evolving.png') });
+
+  check('no page errors', pageErrors.length === 0, pageErrors.slice(0, 5).join(' | '));
+} catch (e) {
+  check('the test ran', false, e.stack || String(e));
+} finally {
+  fs.writeFileSync(path.join(outDir, 'console.log'), consoleLines.join('\n') + '\n');
+  if (context) await context.close();
+  server.close();
+  fs.rmSync(profile, { recursive: true, force: true });
+}
+const failed = results.filter((r) => !r.ok).length;
+console.log(`screenshots: ${outDir}/page.png, page-evolving.png`);
+console.log(`web: ${results.length - failed} passed, ${failed} failed`);
+process.exit(failed ? 1 : 0);

@@ -1,0 +1,652 @@
+#include "app.h"
+
+#include "riemesh/mesh_io.h"
+
+#include <imgui.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cfloat>
+#include <cmath>
+#include <cstdio>
+#include <exception>
+#include <fstream>
+
+namespace riemesh::viewer {
+
+double nowSeconds()
+{
+    using Clock = std::chrono::steady_clock;
+    static const Clock::time_point start = Clock::now();
+    return std::chrono::duration<double>(Clock::now() - start).count();
+}
+
+namespace {
+
+/// G' = I + scale (G - I): eigenvalues 1 + scale (mu - 1), so the metric stays SPD with eigenvalues
+/// >= 1 for any scale >= 0 (0: Euclidean, 1: the metric as computed).
+class ScaledMetric final : public MetricField {
+public:
+    ScaledMetric(const MetricField& base, double scale) : mBase(base), mScale(scale) {}
+    Mat3 at(const Vec3& x) const override
+    {
+        const Mat3 g = mBase.at(x);
+        return Mat3::Identity() + mScale * (g - Mat3::Identity());
+    }
+    double maxEigenvalue() const override { return 1.0 + mScale * (mBase.maxEigenvalue() - 1.0); }
+
+private:
+    const MetricField& mBase;
+    double mScale;
+};
+
+/// The paper's phantom as an analytic fog image, N = 100 unit voxels: a cube with a spherical cavity
+/// opening through a small hole in its top (+z) face; 1 inside the object, 0 outside, a one-voxel
+/// ramp across the surface (its 0.5 isosurface is the surface).
+double phantomDistance(const Vec3& p)
+{
+    const Vec3 c(49.5, 49.5, 49.5);
+    const Vec3 q = (p - c).cwiseAbs() - Vec3::Constant(30.0);
+    const double cube = q.cwiseMax(0.0).norm() + std::min(q.maxCoeff(), 0.0);
+    const double cavity = (p - c).norm() - 20.0;
+    const double r = std::hypot(p.x() - c.x(), p.y() - c.y());
+    const double hole = std::max(r - 5.0, c.z() - p.z()); // a half-infinite cylinder going up
+    return std::max(cube, -std::min(cavity, hole));
+}
+
+/// A perceptual-ish blue-to-yellow colour map (viridis-like), t in [0,1].
+Vec3f colourMap(float t)
+{
+    t = std::clamp(t, 0.f, 1.f);
+    static const Vec3f stops[5] = {{0.267f, 0.005f, 0.329f}, {0.230f, 0.322f, 0.546f}, {0.128f, 0.567f, 0.551f},
+                                   {0.369f, 0.789f, 0.383f}, {0.993f, 0.906f, 0.144f}};
+    const float x = t * 4.f;
+    const int i = std::min(3, int(x));
+    const float f = x - float(i);
+    return stops[i] * (1.f - f) + stops[i + 1] * f;
+}
+
+const char* kColourNames[] = {"shaded", "metric edge length", "local resolution"};
+const char* kAxisNames[] = {"x", "y", "z"};
+
+} // namespace
+
+Vec3f Camera::eye() const
+{
+    const Vec3f dir(std::cos(pitch) * std::cos(yaw), std::cos(pitch) * std::sin(yaw), std::sin(pitch));
+    return target + distance * dir;
+}
+
+Mat4f Camera::view() const
+{
+    const Vec3f e = eye();
+    const Vec3f f = (target - e).normalized();
+    const Vec3f s = f.cross(Vec3f(0, 0, 1)).normalized();
+    const Vec3f u = s.cross(f);
+    Mat4f m = Mat4f::Identity();
+    m.block<1, 3>(0, 0) = s.transpose();
+    m.block<1, 3>(1, 0) = u.transpose();
+    m.block<1, 3>(2, 0) = -f.transpose();
+    m(0, 3) = -s.dot(e);
+    m(1, 3) = -u.dot(e);
+    m(2, 3) = f.dot(e);
+    return m;
+}
+
+Mat4f Camera::projection(float aspect) const
+{
+    const float n = distance * 0.01f, fa = distance * 10.f;
+    const float t = 1.f / std::tan(fovY / 2);
+    Mat4f m = Mat4f::Zero();
+    m(0, 0) = t / aspect;
+    m(1, 1) = t;
+    m(2, 2) = (fa + n) / (n - fa);
+    m(2, 3) = 2 * fa * n / (n - fa);
+    m(3, 2) = -1;
+    return m;
+}
+
+App::App() = default;
+App::~App() = default;
+
+void App::installVolume(std::unique_ptr<NanoVolume> volume, std::unique_ptr<ScalarImage> image,
+                        std::unique_ptr<MetricField> metric, const std::string& name)
+{
+    mEvolution.reset(); // holds references to the old image and metric
+    mVolume = std::move(volume);
+    mImage = std::move(image);
+    mVolumeMetric = std::move(metric);
+    mVolumeName = name;
+
+    // Intensity range from a coarse sampling of the box (window/level defaults).
+    const Box3 b = mImage->bounds();
+    mImageMin = 1e300;
+    mImageMax = -1e300;
+    const int n = 24;
+    for (int k = 0; k <= n; ++k)
+        for (int j = 0; j <= n; ++j)
+            for (int i = 0; i <= n; ++i) {
+                const Vec3 t(double(i) / n, double(j) / n, double(k) / n);
+                const double v = mImage->value(b.min() + t.cwiseProduct(b.sizes()));
+                mImageMin = std::min(mImageMin, v);
+                mImageMax = std::max(mImageMax, v);
+            }
+    if (!(mImageMax > mImageMin)) mImageMax = mImageMin + 1;
+    mWindow = float(mImageMax - mImageMin);
+    mLevel = float(0.5 * (mImageMax + mImageMin));
+
+    ModelParameters d;
+    const std::string cls = mVolume ? mVolume->imageClass() : "fog";
+    if (cls == "levelset") {
+        d.iso = 0.0;
+        d.objectBrighter = false; // inside is negative
+    } else if (cls == "fog") {
+        d.iso = 0.5;
+    } else {
+        d.iso = 0.5 * (mImageMin + mImageMax);
+    }
+    d.riemannian = mVolumeMetric != nullptr;
+    mDefaults = d;
+    mParams = d;
+    mSlicePosition = 0.5f;
+    homeCamera();
+    reset();
+}
+
+bool App::loadVolume(const std::string& path)
+{
+    try {
+        auto volume = std::make_unique<NanoVolume>(NanoVolume::read(path));
+        auto image = std::make_unique<NanoImage>(volume->imageGrid());
+        std::unique_ptr<MetricField> metric;
+        if (volume->metricDiag())
+            metric = std::make_unique<NanoMetric>(volume->metricDiag(), volume->metricOff(),
+                                                  volume->metricMaxEigenvalue());
+        const std::string name = path.substr(path.find_last_of('/') + 1);
+        installVolume(std::move(volume), std::move(image), std::move(metric), name);
+        mMessage.clear();
+        std::printf("riemesh: loaded %s (%s, grid '%s'%s)\n", name.c_str(), mVolume->imageClass().c_str(),
+                    mVolume->imageName().c_str(), mVolumeMetric ? ", with metric" : ", no metric");
+        return true;
+    } catch (const std::exception& e) {
+        mMessage = "Cannot open " + path.substr(path.find_last_of('/') + 1) + ": " + e.what();
+        std::fprintf(stderr, "riemesh: %s\n", mMessage.c_str());
+        return false;
+    }
+}
+
+void App::loadAnalyticPhantom()
+{
+    auto image = std::make_unique<FunctionImage>(
+        [](const Vec3& p) { return std::clamp(0.5 - phantomDistance(p), 0.0, 1.0); },
+        Box3(Vec3::Zero(), Vec3::Constant(99.0)), 1.0);
+    installVolume(nullptr, std::move(image), nullptr, "analytic phantom (no .nvdb found)");
+}
+
+void App::rebuildMetric()
+{
+    if (mParams.riemannian && mVolumeMetric) {
+        if (mParams.muScale == 1.0)
+            mMetric = std::make_unique<ScaledMetric>(*mVolumeMetric, 1.0);
+        else
+            mMetric = std::make_unique<ScaledMetric>(*mVolumeMetric, std::max(0.0, mParams.muScale));
+    } else {
+        mMetric = std::make_unique<EuclideanMetric>();
+    }
+}
+
+EvolutionOptions App::evolutionOptions() const
+{
+    EvolutionOptions o;
+    o.delta = mParams.deltaVoxels * mImage->voxelSize();
+    o.zeta = mParams.zeta;
+    o.maxIterations = mParams.maxIterations;
+    o.forces.iso = mParams.iso;
+    o.forces.objectBrighter = mParams.objectBrighter;
+    o.forces.externalWeight = mParams.externalWeight;
+    o.forces.internalWeight = mParams.internalWeight;
+    o.forces.curvatureWeight = mParams.curvatureWeight;
+    o.forces.gradientWeight = mParams.gradientWeight;
+    return o;
+}
+
+void App::reset()
+{
+    if (!mImage) return;
+    mEvolution.reset();
+    rebuildMetric();
+    const EvolutionOptions o = evolutionOptions();
+    try {
+        mMesh = makeInitialBox(*mImage, 0.5 * (1.0 + o.zeta) * o.delta);
+    } catch (const std::exception& e) {
+        mMessage = std::string("Cannot initialise: ") + e.what();
+        mMesh = Mesh();
+        return;
+    }
+    mEvolution = std::make_unique<Evolution>(mMesh, *mImage, *mMetric, o);
+    mIterationBase = 0;
+    mIteration = 0;
+    mComputeSeconds = 0;
+    mWallStart = nowSeconds();
+    mReported = false;
+    mMerges = mCuts = 0;
+    mEnergyLog.clear();
+    mMeshDirty = mSliceDirty = true;
+    mStatsCountdown = 0;
+    mTopology = topologyOf(mMesh);
+    updateStatistics();
+}
+
+void App::advance(double budgetMs)
+{
+    if (!mEvolution || !mPlaying || mEvolution->done()) return;
+    const double start = nowSeconds();
+    do {
+        const IterationStats s = mEvolution->step();
+        mIteration = mIterationBase + int(mEvolution->history().size());
+        mComputeSeconds += s.milliseconds * 1e-3;
+        mMerges += s.merges;
+        mCuts += s.cuts;
+        const double delta2 = std::pow(evolutionOptions().delta, 2);
+        mEnergyLog.push_back(float(std::log10(s.meanKineticEnergy / delta2 + 1e-12)));
+        mMeshDirty = true;
+    } while (!mEvolution->done() && (nowSeconds() - start) * 1e3 < budgetMs);
+    if (mEvolution->done()) onStopped();
+}
+
+void App::onStopped()
+{
+    if (mReported) return;
+    mReported = true;
+    const MeshTopology t = topologyOf(mMesh);
+    const StopReason r = mEvolution->reason();
+    if (r == StopReason::Converged) {
+        std::printf("riemesh: converged iterations=%d vertices=%zu seconds=%.3f\n", mIteration, t.vertices,
+                    mComputeSeconds);
+    } else {
+        std::printf("riemesh: stopped (%s) iterations=%d vertices=%zu seconds=%.3f\n", toString(r), mIteration,
+                    t.vertices, mComputeSeconds);
+    }
+    std::printf("riemesh: components=%d genus=%d merges=%d cuts=%d wall_seconds=%.3f\n", t.components, t.genus,
+                mMerges, mCuts, nowSeconds() - mWallStart);
+    std::fflush(stdout);
+}
+
+std::string App::runToConvergence()
+{
+    mPlaying = true;
+    while (mEvolution && !mEvolution->done()) advance(1e9);
+    return mEvolution ? toString(mEvolution->reason()) : "no model";
+}
+
+void App::homeCamera()
+{
+    if (!mImage) return;
+    const Box3 b = mImage->bounds();
+    mScene.camera.target = b.center().cast<float>();
+    mScene.camera.distance = float(1.6 * b.diagonal().norm());
+    mScene.camera.yaw = -1.1f;
+    mScene.camera.pitch = 0.5f;
+}
+
+void App::frameCamera()
+{
+    if (mMesh.n_vertices() == 0) return homeCamera();
+    Box3 b;
+    for (auto v : mMesh.vertices()) b.extend(position(mMesh, v));
+    mScene.camera.target = b.center().cast<float>();
+    mScene.camera.distance = float(std::max(1.0, 1.5 * b.diagonal().norm()));
+}
+
+void App::handleCameraInput(int width, int height)
+{
+    ImGuiIO& io = ImGui::GetIO();
+    Camera& c = mScene.camera;
+    if (!io.WantCaptureMouse) {
+        const ImVec2 d = io.MouseDelta;
+        if (ImGui::IsMouseDown(ImGuiMouseButton_Left) && !io.KeyShift) {
+            c.yaw -= d.x * 0.008f;
+            c.pitch = std::clamp(c.pitch + d.y * 0.008f, -1.55f, 1.55f);
+        } else if (ImGui::IsMouseDown(ImGuiMouseButton_Right) || ImGui::IsMouseDown(ImGuiMouseButton_Middle) ||
+                   (ImGui::IsMouseDown(ImGuiMouseButton_Left) && io.KeyShift)) {
+            const Mat4f v = c.view();
+            const Vec3f right = v.block<1, 3>(0, 0).transpose(), up = v.block<1, 3>(1, 0).transpose();
+            const float scale = 2.f * c.distance * std::tan(c.fovY / 2) / float(std::max(1, height));
+            c.target += (-d.x * right + d.y * up) * scale;
+        }
+        if (io.MouseWheel != 0) c.distance *= std::pow(0.88f, io.MouseWheel);
+    }
+    if (!io.WantCaptureKeyboard) {
+        if (ImGui::IsKeyPressed('F', false)) frameCamera();
+        if (ImGui::IsKeyPressed('H', false)) homeCamera();
+        if (ImGui::IsKeyPressed(ImGui::GetKeyIndex(ImGuiKey_Space), false)) mPlaying = !mPlaying;
+    }
+    (void)width;
+}
+
+void App::rebuildMeshGeometry()
+{
+    Scene& s = mScene;
+    s.vertices.clear();
+    s.triangles.clear();
+    s.edges.clear();
+    std::vector<std::uint32_t> index(mMesh.n_vertices(), 0);
+    std::vector<float> value(mMesh.n_vertices(), 0.f);
+    const double delta = evolutionOptions().delta;
+    float lo = 1e30f, hi = -1e30f;
+    std::uint32_t n = 0;
+    for (auto v : mMesh.vertices()) {
+        index[v.idx()] = n++;
+        if (mColour == ColourMode::Shaded) continue;
+        const Vec3 p = position(mMesh, v);
+        const Mat3 g = mColour == ColourMode::MetricEdgeLength ? mMetric->at(p) : Mat3::Identity();
+        double sum = 0;
+        int count = 0;
+        for (auto w : mMesh.vv_range(v)) {
+            const Vec3 e = position(mMesh, w) - p;
+            sum += std::sqrt(e.dot(g * e));
+            ++count;
+        }
+        const float x = count ? float(sum / count / delta) : 0.f;
+        value[v.idx()] = x;
+        lo = std::min(lo, x);
+        hi = std::max(hi, x);
+    }
+    // Metric edge length: fixed scale [1, zeta] (the regularity band); local resolution: the mesh's range.
+    float a = 1.f, b = float(mParams.zeta);
+    if (mColour == ColourMode::LocalResolution) {
+        a = lo;
+        b = std::max(hi, lo + 1e-6f);
+    }
+    s.vertices.reserve(std::size_t(n) * 9);
+    for (auto v : mMesh.vertices()) {
+        const Vec3 p = position(mMesh, v);
+        const Vec3 nrm = vertexNormal(mMesh, v);
+        const Vec3f col = mColour == ColourMode::Shaded ? Vec3f(0.85f, 0.72f, 0.55f)
+                                                        : colourMap((value[v.idx()] - a) / (b - a));
+        const float f[9] = {float(p.x()), float(p.y()), float(p.z()), float(nrm.x()), float(nrm.y()),
+                            float(nrm.z()), col.x(), col.y(), col.z()};
+        s.vertices.insert(s.vertices.end(), f, f + 9);
+    }
+    s.triangles.reserve(mMesh.n_faces() * 3);
+    for (auto f : mMesh.faces())
+        for (auto v : mMesh.fv_range(f)) s.triangles.push_back(index[v.idx()]);
+    s.edges.reserve(mMesh.n_edges() * 2);
+    for (auto e : mMesh.edges()) {
+        s.edges.push_back(index[mMesh.from_vertex_handle(mMesh.halfedge_handle(e, 0)).idx()]);
+        s.edges.push_back(index[mMesh.to_vertex_handle(mMesh.halfedge_handle(e, 0)).idx()]);
+    }
+    // Cross-section with the slice plane.
+    s.section.clear();
+    const Box3 bounds = mImage->bounds();
+    const double plane = bounds.min()[mSliceAxis] + mSlicePosition * bounds.sizes()[mSliceAxis];
+    for (auto f : mMesh.faces()) {
+        Vec3 p[3];
+        double d[3];
+        int k = 0;
+        for (auto v : mMesh.fv_range(f)) {
+            p[k] = position(mMesh, v);
+            d[k] = p[k][mSliceAxis] - plane;
+            ++k;
+        }
+        for (int i = 0; i < 3; ++i) {
+            const int j = (i + 1) % 3;
+            if ((d[i] < 0) != (d[j] < 0)) {
+                const Vec3 x = p[i] + (d[i] / (d[i] - d[j])) * (p[j] - p[i]);
+                s.section.insert(s.section.end(), {float(x.x()), float(x.y()), float(x.z())});
+            }
+        }
+        if (s.section.size() % 6 != 0) s.section.resize(s.section.size() - 3); // a vertex on the plane
+    }
+    ++s.meshVersion;
+    mMeshDirty = false;
+}
+
+void App::rebuildSlice()
+{
+    SliceImage& sl = mScene.slice;
+    const Box3 b = mImage->bounds();
+    const int ua = (mSliceAxis + 1) % 3, va = (mSliceAxis + 2) % 3;
+    const double h = mImage->voxelSize();
+    sl.width = std::clamp(int(b.sizes()[ua] / h) + 1, 2, 256);
+    sl.height = std::clamp(int(b.sizes()[va] / h) + 1, 2, 256);
+    sl.rgba.resize(std::size_t(sl.width) * sl.height * 4);
+    const double w = b.min()[mSliceAxis] + mSlicePosition * b.sizes()[mSliceAxis];
+    const float lo = mLevel - 0.5f * mWindow, span = std::max(1e-12f, mWindow);
+    for (int j = 0; j < sl.height; ++j)
+        for (int i = 0; i < sl.width; ++i) {
+            Vec3 p;
+            p[mSliceAxis] = w;
+            p[ua] = b.min()[ua] + b.sizes()[ua] * (double(i) / (sl.width - 1));
+            p[va] = b.min()[va] + b.sizes()[va] * (double(j) / (sl.height - 1));
+            const float t = std::clamp((float(mImage->value(p)) - lo) / span, 0.f, 1.f);
+            const auto g = std::uint8_t(std::lround(255 * t));
+            std::uint8_t* px = &sl.rgba[(std::size_t(j) * sl.width + i) * 4];
+            px[0] = px[1] = px[2] = g;
+            px[3] = 255;
+        }
+    auto corner = [&](double u, double v) {
+        Vec3 p;
+        p[mSliceAxis] = w;
+        p[ua] = u;
+        p[va] = v;
+        return Vec3f(p.cast<float>());
+    };
+    sl.corners[0] = corner(b.min()[ua], b.min()[va]);
+    sl.corners[1] = corner(b.max()[ua], b.min()[va]);
+    sl.corners[2] = corner(b.max()[ua], b.max()[va]);
+    sl.corners[3] = corner(b.min()[ua], b.max()[va]);
+    ++mScene.sliceVersion;
+    mSliceDirty = false;
+}
+
+void App::updateStatistics()
+{
+    // Histogram of metric edge lengths / delta over [0, 1.5 zeta].
+    const int bins = 40;
+    mHistogram.assign(bins, 0.f);
+    if (!mMetric || mMesh.n_edges() == 0) return;
+    const double delta = evolutionOptions().delta, top = 1.5 * mParams.zeta;
+    for (auto e : mMesh.edges()) {
+        const double l = metricLength(*mMetric, mMesh, e) / delta;
+        const int bin = std::clamp(int(l / top * bins), 0, bins - 1);
+        mHistogram[bin] += 1.f;
+    }
+    mHistogramMax = *std::max_element(mHistogram.begin(), mHistogram.end());
+}
+
+std::optional<std::string> App::takeDownload()
+{
+    auto d = std::move(mDownload);
+    mDownload.reset();
+    return d;
+}
+
+void App::exportMesh(const char* extension)
+{
+#ifdef __EMSCRIPTEN__
+    const std::string path = std::string("/tmp/riemesh-mesh") + extension;
+#else
+    const std::string path = std::string("riemesh-mesh") + extension;
+#endif
+    try {
+        writeMesh(path, mMesh, "riemesh viewer, " + mVolumeName);
+        mDownload = path;
+        mMessage = "Wrote " + path;
+    } catch (const std::exception& e) {
+        mMessage = std::string("Cannot write the mesh: ") + e.what();
+    }
+}
+
+void App::drawPanels()
+{
+    ImGui::SetNextWindowPos(ImVec2(8, 8), ImGuiCond_FirstUseEver);
+    ImGui::SetNextWindowSize(ImVec2(340, 0), ImGuiCond_FirstUseEver);
+    ImGui::Begin("riemesh");
+    ImGui::TextWrapped("%s", mVolumeName.c_str());
+    if (!mMessage.empty()) ImGui::TextColored(ImVec4(1.f, 0.45f, 0.35f, 1.f), "%s", mMessage.c_str());
+
+    // --- run controls
+    if (ImGui::Button(mPlaying ? "Pause" : "Play", ImVec2(60, 0))) mPlaying = !mPlaying;
+    ImGui::SameLine();
+    if (ImGui::Button("Step", ImVec2(60, 0)) && mEvolution) {
+        // Step pauses: one iteration, then wait.
+        mPlaying = true;
+        if (mEvolution->done()) mEvolution->setOptions(evolutionOptions());
+        advance(0.0);
+        mPlaying = false;
+    }
+    ImGui::SameLine();
+    if (ImGui::Button("Reset", ImVec2(60, 0))) reset();
+
+    ImGui::Text("iteration %d  (%s)", mIteration, stateName());
+    ImGui::Text("vertices %zu  faces %zu", mTopology.vertices, mTopology.faces);
+    ImGui::Text("components %d  genus %d", mTopology.components, mTopology.genus);
+    ImGui::Text("merges %d  cuts %d  compute %.2f s", mMerges, mCuts, mComputeSeconds);
+    ImGui::Text("frame %.1f ms", mLastFrameMs);
+
+    // --- plots
+    if (ImGui::CollapsingHeader("Plots", ImGuiTreeNodeFlags_DefaultOpen)) {
+        const int n = int(mEnergyLog.size());
+        const int shown = std::min(n, 400);
+        char overlay[64];
+        std::snprintf(overlay, sizeof overlay, "log10 E/delta^2 = %.2f", n ? mEnergyLog.back() : 0.f);
+        ImGui::PlotLines("##energy", mEnergyLog.data() + (n - shown), shown, 0, overlay, FLT_MAX, FLT_MAX, ImVec2(-1, 60));
+        ImGui::TextDisabled("mean kinetic energy per iteration");
+        ImGui::PlotHistogram("##lengths", mHistogram.data(), int(mHistogram.size()), 0, "edge length / delta",
+                             0.f, mHistogramMax * 1.1f, ImVec2(-1, 50));
+        ImGui::TextDisabled("0 .. 1.5 zeta; the band [1, zeta] is the regular one");
+    }
+
+    // --- parameters
+    bool changed = false, metricChanged = false;
+    if (ImGui::CollapsingHeader("Model", ImGuiTreeNodeFlags_DefaultOpen)) {
+        const double isoLo = mImageMin, isoHi = mImageMax;
+        changed |= ImGui::SliderScalar("iso", ImGuiDataType_Double, &mParams.iso, &isoLo, &isoHi, "%.3f");
+        const double dLo = 0.5, dHi = 8, zLo = 2.0, zHi = 5.0, mLo = 0, mHi = 2, wLo = 0, wHi = 2, cHi = 0.5;
+        changed |= ImGui::SliderScalar("delta (voxels)", ImGuiDataType_Double, &mParams.deltaVoxels, &dLo, &dHi, "%.2f");
+        changed |= ImGui::SliderScalar("zeta", ImGuiDataType_Double, &mParams.zeta, &zLo, &zHi, "%.2f");
+        if (!mVolumeMetric) ImGui::BeginDisabled();
+        metricChanged |= ImGui::Checkbox("Riemannian metric", &mParams.riemannian);
+        metricChanged |= ImGui::SliderScalar("mu_max scale", ImGuiDataType_Double, &mParams.muScale, &mLo, &mHi, "%.2f");
+        if (!mVolumeMetric) ImGui::EndDisabled();
+        changed |= ImGui::SliderScalar("inflation", ImGuiDataType_Double, &mParams.externalWeight, &wLo, &wHi, "%.2f");
+        changed |= ImGui::SliderScalar("umbrella", ImGuiDataType_Double, &mParams.internalWeight, &wLo, &wHi, "%.2f");
+        changed |= ImGui::SliderScalar("curvature", ImGuiDataType_Double, &mParams.curvatureWeight, &wLo, &cHi, "%.3f");
+        changed |= ImGui::SliderScalar("gradient", ImGuiDataType_Double, &mParams.gradientWeight, &wLo, &wHi, "%.2f");
+        changed |= ImGui::Checkbox("object brighter than iso", &mParams.objectBrighter);
+        if (ImGui::Button("Defaults")) {
+            metricChanged |= mParams.riemannian != mDefaults.riemannian || mParams.muScale != mDefaults.muScale;
+            mParams = mDefaults;
+            changed = true;
+        }
+    }
+    if (metricChanged || changed) applyParameters(metricChanged);
+
+    // --- display
+    if (ImGui::CollapsingHeader("Display")) {
+        int colour = int(mColour);
+        if (ImGui::Combo("colour", &colour, kColourNames, 3)) {
+            mColour = ColourMode(colour);
+            mMeshDirty = true;
+        }
+        ImGui::Checkbox("mesh", &mScene.showMesh);
+        ImGui::SameLine();
+        ImGui::Checkbox("wireframe", &mScene.wireframe);
+        ImGui::SameLine();
+        ImGui::Checkbox("slice", &mScene.showSlice);
+        bool slice = ImGui::Combo("slice axis", &mSliceAxis, kAxisNames, 3);
+        slice |= ImGui::SliderFloat("slice position", &mSlicePosition, 0.f, 1.f, "%.2f");
+        const float range = float(mImageMax - mImageMin);
+        slice |= ImGui::DragFloat("window", &mWindow, range * 0.005f, range * 0.001f, range * 4.f, "%.3f");
+        slice |= ImGui::DragFloat("level", &mLevel, range * 0.005f, float(mImageMin) - range, float(mImageMax) + range, "%.3f");
+        if (slice) mSliceDirty = mMeshDirty = true;
+        if (ImGui::Button("Frame (F)")) frameCamera();
+        ImGui::SameLine();
+        if (ImGui::Button("Home (H)")) homeCamera();
+        ImGui::TextDisabled("drag: orbit  right/shift-drag: pan  wheel: zoom");
+    }
+
+    // --- files
+    if (ImGui::CollapsingHeader("Files")) {
+        ImGui::TextWrapped("Drop a .nvdb made by `vdb2mesh --export-nvdb` on the window to segment it.");
+        if (ImGui::Button("Download PLY")) exportMesh(".ply");
+        ImGui::SameLine();
+        if (ImGui::Button("Download OBJ")) exportMesh(".obj");
+    }
+    ImGui::End();
+}
+
+void App::applyParameters(bool metricChanged)
+{
+    if (!mEvolution) return;
+    if (metricChanged) {
+        // The Evolution keeps a reference to the metric: continue on the same mesh with a new one.
+        mIterationBase = mIteration;
+        mEvolution.reset();
+        rebuildMetric();
+        mEvolution = std::make_unique<Evolution>(mMesh, *mImage, *mMetric, evolutionOptions());
+    } else {
+        mEvolution->setOptions(evolutionOptions());
+    }
+    mReported = false;
+    mMeshDirty = true;
+}
+
+const char* App::stateName() const
+{
+    if (!mEvolution) return "no model";
+    if (!mEvolution->done()) return mPlaying ? "evolving" : "paused";
+    return toString(mEvolution->reason());
+}
+
+std::string App::stateJson() const
+{
+    std::string name;
+    for (char c : mVolumeName) name += (c == '"' || c == '\\') ? '_' : c;
+    char buffer[512];
+    std::snprintf(buffer, sizeof buffer,
+                  "{\"iteration\": %d, \"vertices\": %zu, \"components\": %d, \"genus\": %d, \"playing\": %s, "
+                  "\"state\": \"%s\", \"computeSeconds\": %.4f, \"merges\": %d, \"cuts\": %d, \"volume\": \"%s\"}",
+                  mIteration, mTopology.vertices, mTopology.components, mTopology.genus, mPlaying ? "true" : "false",
+                  stateName(), mComputeSeconds, mMerges, mCuts, name.c_str());
+    return buffer;
+}
+
+bool App::setParameter(const std::string& name, double value)
+{
+    bool metric = false;
+    if (name == "iso") mParams.iso = value;
+    else if (name == "delta") mParams.deltaVoxels = value;
+    else if (name == "zeta") mParams.zeta = value;
+    else if (name == "mu_scale") { mParams.muScale = value; metric = true; }
+    else if (name == "riemannian") { mParams.riemannian = value != 0; metric = true; }
+    else if (name == "inflation") mParams.externalWeight = value;
+    else if (name == "umbrella") mParams.internalWeight = value;
+    else if (name == "curvature") mParams.curvatureWeight = value;
+    else if (name == "gradient") mParams.gradientWeight = value;
+    else return false;
+    applyParameters(metric);
+    return true;
+}
+
+void App::frame(double budgetMs, int width, int height)
+{
+    const double start = nowSeconds();
+    advance(budgetMs);
+    handleCameraInput(width, height);
+    drawPanels();
+    if (mSliceDirty && mImage) rebuildSlice();
+    if (mMeshDirty) {
+        rebuildMeshGeometry();
+        mTopology = topologyOf(mMesh);
+        // Statistics cost a metric evaluation per edge: every few frames while evolving.
+        if (--mStatsCountdown <= 0 || !mPlaying || (mEvolution && mEvolution->done())) {
+            updateStatistics();
+            mStatsCountdown = 10;
+        }
+    }
+    mLastFrameMs = (nowSeconds() - start) * 1e3;
+}
+
+} // namespace riemesh::viewer

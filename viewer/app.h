@@ -1,0 +1,167 @@
+// viewer/app.h: the viewer's state and user interface (Dear ImGui), without any GL.
+//
+// An App owns the volume (image + metric), the evolving mesh and its Evolution, the camera and the
+// display settings. Each frame the main loop calls `frame()`: it advances the evolution for a bounded
+// time, handles camera input and draws the ImGui panels; the renderer then reads `scene()`.
+#pragma once
+
+#include "riemesh/evolution.h"
+#include "riemesh/image.h"
+#include "riemesh/mesh.h"
+#include "riemesh/metric.h"
+
+#include <Eigen/Core>
+
+#include <cstdint>
+#include <memory>
+#include <optional>
+#include <string>
+#include <vector>
+
+namespace riemesh::viewer {
+
+using Vec3f = Eigen::Vector3f;
+using Mat4f = Eigen::Matrix4f;
+
+/// Model parameters the user can change live; `defaults()` depends on the volume.
+struct ModelParameters {
+    double iso = 0.5;            ///< image intensity of the surface
+    bool objectBrighter = true;  ///< object where I > iso
+    double deltaVoxels = 2.0;    ///< shortest edge, metric length, voxels
+    double zeta = 2.5;           ///< longest/shortest edge ratio
+    double muScale = 1.0;        ///< metric eigenvalues become 1 + muScale * (mu - 1)
+    bool riemannian = true;      ///< false: Euclidean metric (G = I)
+    double externalWeight = 1.0; ///< inflation/deflation force
+    double internalWeight = 0.3; ///< tangential umbrella
+    double curvatureWeight = 0.05; ///< normal umbrella (smoothing)
+    double gradientWeight = 0.0; ///< attraction to strong gradients
+    int maxIterations = 3000;
+};
+
+/// What colours the mesh.
+enum class ColourMode { Shaded = 0, MetricEdgeLength = 1, LocalResolution = 2 };
+
+/// Orbit camera around `target` (world space): yaw/pitch in radians, distance in world units.
+struct Camera {
+    Vec3f target = Vec3f::Zero();
+    float yaw = 0.6f, pitch = 0.45f, distance = 100.f;
+    float fovY = 0.8f; ///< radians
+    Mat4f view() const;
+    Mat4f projection(float aspect) const;
+    Vec3f eye() const;
+};
+
+/// One axis-aligned slice of the image, as an RGBA8 texture spanning `corners` (world space).
+struct SliceImage {
+    int width = 0, height = 0;
+    std::vector<std::uint8_t> rgba;
+    Vec3f corners[4]; ///< (u0,v0) (u1,v0) (u1,v1) (u0,v1)
+};
+
+/// Everything the renderer draws, rebuilt by the App when something changed.
+struct Scene {
+    /// Mesh vertices: x y z nx ny nz r g b (world space, unit outward normal, colour in [0,1]).
+    std::vector<float> vertices;
+    /// Triangles (3 indices each) and edges (2 each) into `vertices`.
+    std::vector<std::uint32_t> triangles, edges;
+    /// The mesh's cross-section with the slice plane: per end x y z.
+    std::vector<float> section;
+    SliceImage slice;
+    std::uint64_t meshVersion = 0, sliceVersion = 0;
+    bool showMesh = true, wireframe = false, showSlice = true;
+    Camera camera;
+    Vec3f background{0.11f, 0.12f, 0.14f};
+};
+
+class App {
+public:
+    App();
+    ~App();
+
+    /// Loads a .nvdb volume (image + optional metric) and restarts on it. On failure the current state
+    /// is kept and the message is shown in the UI; returns false.
+    bool loadVolume(const std::string& path);
+    /// The built-in analytic phantom (the paper's cube with a cavity opening through a hole), used
+    /// when no .nvdb is available.
+    void loadAnalyticPhantom();
+    /// Restarts the evolution from the initial box with the current parameters.
+    void reset();
+
+    /// One frame: evolution (at most `budgetMs` of work), camera input, UI. `width`/`height` are the
+    /// framebuffer size in pixels.
+    void frame(double budgetMs, int width, int height);
+
+    /// Runs without UI until the evolution stops (native `--headless`); returns the final stats line.
+    std::string runToConvergence();
+
+    const Scene& scene() const { return mScene; }
+    bool playing() const { return mPlaying; }
+    void setPlaying(bool playing) { mPlaying = playing; }
+    /// Set when the page should download `downloadPath()` (web) / has written it (native).
+    std::optional<std::string> takeDownload();
+    const std::string& statusMessage() const { return mMessage; }
+
+    /// The state as JSON (the page's JS API and tests): iteration, vertices, components, genus,
+    /// playing, state ("evolving", "paused", "converged", ...), computeSeconds, volume.
+    std::string stateJson() const;
+    /// Sets a model parameter by name (iso, delta, zeta, mu_scale, riemannian, inflation, umbrella,
+    /// curvature, gradient) as if changed in the UI; false for an unknown name.
+    bool setParameter(const std::string& name, double value);
+
+private:
+    // the data
+    std::string mVolumeName;
+    std::unique_ptr<NanoVolume> mVolume;
+    std::unique_ptr<ScalarImage> mImage;
+    std::unique_ptr<MetricField> mVolumeMetric;   ///< as read (nullptr: none in the file)
+    std::unique_ptr<MetricField> mMetric;         ///< what the evolution uses (scaled / Euclidean)
+    double mImageMin = 0, mImageMax = 1;
+    // the model
+    ModelParameters mParams, mDefaults;
+    Mesh mMesh;
+    std::unique_ptr<Evolution> mEvolution;
+    bool mPlaying = true;
+    bool mReported = false;
+    double mComputeSeconds = 0;
+    double mWallStart = 0;
+    MeshTopology mTopology;
+    int mMerges = 0, mCuts = 0;
+    int mIterationBase = 0;            ///< iterations of previous Evolution objects (metric changes)
+    int mIteration = 0;
+    std::vector<float> mEnergyLog;     ///< log10 mean kinetic energy / delta^2 per iteration
+    std::vector<float> mHistogram;     ///< edge metric length / delta, binned
+    float mHistogramMax = 0;
+    // display
+    Scene mScene;
+    ColourMode mColour = ColourMode::MetricEdgeLength;
+    int mSliceAxis = 2;
+    float mSlicePosition = 0.5f;       ///< fraction of the bounds along the axis
+    float mWindow = 1.f, mLevel = 0.5f;
+    bool mSliceDirty = true, mMeshDirty = true;
+    int mStatsCountdown = 0;
+    std::string mMessage;
+    std::optional<std::string> mDownload;
+    double mLastFrameMs = 0;
+
+    void installVolume(std::unique_ptr<NanoVolume> volume, std::unique_ptr<ScalarImage> image,
+                       std::unique_ptr<MetricField> metric, const std::string& name);
+    void rebuildMetric();
+    EvolutionOptions evolutionOptions() const;
+    void advance(double budgetMs);
+    void onStopped();
+    void homeCamera();
+    void frameCamera();
+    void handleCameraInput(int width, int height);
+    void rebuildMeshGeometry();
+    void rebuildSlice();
+    void updateStatistics();
+    void drawPanels();
+    void applyParameters(bool metricChanged);
+    const char* stateName() const;
+    void exportMesh(const char* extension);
+};
+
+/// Seconds on a monotonic clock (performance.now() in the browser).
+double nowSeconds();
+
+} // namespace riemesh::viewer

@@ -1,0 +1,214 @@
+// riemesh-viewer: one main loop for the native window (GLFW + OpenGL 3.3) and the browser (emscripten,
+// GLFW + WebGL2). Usage (native): riemesh-viewer [volume.nvdb] [--headless]
+//   --headless   no window: evolve to convergence and print the stats lines (for timing).
+// In the browser the page fetches the demo volume into /data/phantom.nvdb before main() runs.
+#include "app.h"
+#include "render.h"
+
+#include <imgui.h>
+#include <backends/imgui_impl_glfw.h>
+#include <backends/imgui_impl_opengl3.h>
+
+#define GLFW_INCLUDE_NONE
+#include <GLFW/glfw3.h>
+
+#ifdef __EMSCRIPTEN__
+#include <emscripten.h>
+#include <emscripten/html5.h>
+#endif
+
+#include <cstdio>
+#include <cstdlib>
+#include <exception>
+#include <fstream>
+#include <memory>
+#include <stdexcept>
+#include <string>
+
+namespace {
+
+using riemesh::viewer::App;
+using riemesh::viewer::Renderer;
+
+struct Viewer {
+    GLFWwindow* window = nullptr;
+    App app;
+    std::unique_ptr<Renderer> renderer;
+};
+Viewer* gViewer = nullptr;
+
+#ifdef __EMSCRIPTEN__
+constexpr const char* kGlslVersion = "#version 300 es";
+constexpr const char* kDemoVolume = "/data/phantom.nvdb";
+#else
+constexpr const char* kGlslVersion = "#version 330 core";
+constexpr const char* kDemoVolume = "";
+#endif
+
+bool fileExists(const std::string& path) { return !path.empty() && std::ifstream(path).good(); }
+
+void onDrop(GLFWwindow*, int count, const char** paths)
+{
+    if (count > 0 && gViewer) gViewer->app.loadVolume(paths[count - 1]);
+}
+
+void offerDownload(const std::string& path)
+{
+#ifdef __EMSCRIPTEN__
+    // The file is in MEMFS: hand it to the browser as a download, then drop it.
+    EM_ASM(
+        {
+            const path = UTF8ToString($0);
+            const data = FS.readFile(path);
+            const blob = new Blob([data], {type : 'application/octet-stream'});
+            const a = document.createElement('a');
+            a.href = URL.createObjectURL(blob);
+            a.download = path.split('/').pop();
+            document.body.appendChild(a);
+            a.click();
+            setTimeout(() => { URL.revokeObjectURL(a.href); a.remove(); }, 1000);
+            FS.unlink(path);
+        },
+        path.c_str());
+#else
+    std::printf("riemesh: wrote %s\n", path.c_str());
+#endif
+}
+
+void frame()
+{
+    Viewer& v = *gViewer;
+#ifdef __EMSCRIPTEN__
+    // The canvas follows the window: size the GLFW window (and so the canvas) to the CSS size.
+    double cssW = 0, cssH = 0;
+    emscripten_get_element_css_size("#canvas", &cssW, &cssH);
+    int winW = 0, winH = 0;
+    glfwGetWindowSize(v.window, &winW, &winH);
+    if (int(cssW) > 0 && int(cssH) > 0 && (int(cssW) != winW || int(cssH) != winH))
+        glfwSetWindowSize(v.window, int(cssW), int(cssH));
+#endif
+    glfwPollEvents();
+    int width = 0, height = 0;
+    glfwGetFramebufferSize(v.window, &width, &height);
+
+    ImGui_ImplOpenGL3_NewFrame();
+    ImGui_ImplGlfw_NewFrame();
+    ImGui::NewFrame();
+    v.app.frame(10.0, width, height); // at most ~10 ms of evolution per frame: the UI never freezes
+    ImGui::Render();
+
+    v.renderer->draw(v.app.scene(), width, height);
+    ImGui_ImplOpenGL3_RenderDrawData(ImGui::GetDrawData());
+    glfwSwapBuffers(v.window);
+
+    if (auto path = v.app.takeDownload()) offerDownload(*path);
+}
+
+#ifdef __EMSCRIPTEN__
+// The page's JS API (Module.ccall): state as JSON, play/pause, reset, parameters.
+extern "C" {
+EMSCRIPTEN_KEEPALIVE const char* riemesh_state()
+{
+    static std::string state;
+    state = gViewer ? gViewer->app.stateJson() : "{}";
+    return state.c_str();
+}
+EMSCRIPTEN_KEEPALIVE void riemesh_set_playing(int playing)
+{
+    if (gViewer) gViewer->app.setPlaying(playing != 0);
+}
+EMSCRIPTEN_KEEPALIVE void riemesh_reset()
+{
+    if (gViewer) gViewer->app.reset();
+}
+EMSCRIPTEN_KEEPALIVE int riemesh_set_parameter(const char* name, double value)
+{
+    return gViewer && gViewer->app.setParameter(name, value) ? 1 : 0;
+}
+EMSCRIPTEN_KEEPALIVE int riemesh_load(const char* path)
+{
+    return gViewer && gViewer->app.loadVolume(path) ? 1 : 0;
+}
+}
+#endif
+
+int run(int argc, char** argv)
+{
+    std::string volume = kDemoVolume;
+    bool headless = false;
+    for (int i = 1; i < argc; ++i) {
+        const std::string a = argv[i];
+        if (a == "--headless") headless = true;
+        else if (a == "--help" || a == "-h") {
+            std::printf("usage: riemesh-viewer [volume.nvdb] [--headless]\n");
+            return EXIT_SUCCESS;
+        } else volume = a;
+    }
+
+    gViewer = new Viewer; // lives as long as the page (emscripten_set_main_loop never returns)
+    Viewer& v = *gViewer;
+    auto load = [&] {
+        if (fileExists(volume) && v.app.loadVolume(volume)) return;
+        if (!volume.empty()) std::fprintf(stderr, "riemesh: cannot use %s: the analytic phantom instead\n", volume.c_str());
+        v.app.loadAnalyticPhantom();
+    };
+    if (headless) {
+        load();
+        v.app.runToConvergence();
+        return EXIT_SUCCESS;
+    }
+
+    if (!glfwInit()) throw std::runtime_error("glfwInit failed (no display?)");
+#ifdef __EMSCRIPTEN__
+    glfwWindowHint(GLFW_CLIENT_API, GLFW_OPENGL_ES_API);
+    glfwWindowHint(GLFW_CONTEXT_VERSION_MAJOR, 3);
+    glfwWindowHint(GLFW_CONTEXT_VERSION_MINOR, 0);
+#else
+    glfwWindowHint(GLFW_CONTEXT_VERSION_MAJOR, 3);
+    glfwWindowHint(GLFW_CONTEXT_VERSION_MINOR, 3);
+    glfwWindowHint(GLFW_OPENGL_PROFILE, GLFW_OPENGL_CORE_PROFILE);
+#endif
+    glfwWindowHint(GLFW_SAMPLES, 4);
+    v.window = glfwCreateWindow(1280, 800, "riemesh", nullptr, nullptr);
+    if (!v.window) throw std::runtime_error("cannot create an OpenGL 3.3 window");
+    glfwMakeContextCurrent(v.window);
+    glfwSwapInterval(1);
+    glfwSetDropCallback(v.window, onDrop);
+
+    IMGUI_CHECKVERSION();
+    ImGui::CreateContext();
+    ImGuiIO& io = ImGui::GetIO();
+    io.IniFilename = nullptr;
+    ImGui::StyleColorsDark();
+    ImGui::GetStyle().WindowRounding = 4.f;
+    ImGui_ImplGlfw_InitForOpenGL(v.window, true);
+    ImGui_ImplOpenGL3_Init(kGlslVersion);
+    v.renderer = std::make_unique<Renderer>(kGlslVersion);
+
+    load();
+
+#ifdef __EMSCRIPTEN__
+    emscripten_set_main_loop(frame, 0, true);
+#else
+    while (!glfwWindowShouldClose(v.window)) frame();
+    v.renderer.reset();
+    ImGui_ImplOpenGL3_Shutdown();
+    ImGui_ImplGlfw_Shutdown();
+    ImGui::DestroyContext();
+    glfwDestroyWindow(v.window);
+    glfwTerminate();
+#endif
+    return EXIT_SUCCESS;
+}
+
+} // namespace
+
+int main(int argc, char** argv)
+{
+    try {
+        return run(argc, argv);
+    } catch (const std::exception& e) {
+        std::fprintf(stderr, "riemesh-viewer: %s\n", e.what());
+        return EXIT_FAILURE;
+    }
+}
