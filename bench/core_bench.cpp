@@ -12,6 +12,10 @@
 #include "riemesh/evolution.h"
 #include "riemesh/primitives.h"
 
+#include <memory>
+
+#include <nanovdb/util/GridBuilder.h>
+
 #include <chrono>
 #include <cmath>
 #include <cstdio>
@@ -48,30 +52,61 @@ struct Scene {
 FunctionImage fog(const Scene& s)
 {
     auto sdf = s.sdf;
-    return FunctionImage([sdf](const Vec3& x) { return 0.5 + 0.5 * std::tanh(sdf(x)); }, s.bounds, 1.0);
+    // Exact gradient of 0.5 + 0.5 tanh(sdf): 0.5 (1 - tanh^2) grad sdf, grad sdf by central differences.
+    return FunctionImage([sdf](const Vec3& x) { return 0.5 + 0.5 * std::tanh(sdf(x)); }, s.bounds, 1.0,
+                         [sdf](const Vec3& x) {
+                             const double t = std::tanh(sdf(x));
+                             Vec3 g;
+                             for (int a = 0; a < 3; ++a) {
+                                 Vec3 e = Vec3::Zero();
+                                 e[a] = 0.25;
+                                 g[a] = (sdf(x + e) - sdf(x - e)) / 0.5;
+                             }
+                             return Vec3(0.5 * (1 - t * t) * g);
+                         });
 }
 
-/// An analytic stand-in for the structure-tensor metric: lengths across the contour (along the
-/// sdf gradient) are multiplied by up to sqrt(muMax) within a couple of voxels of the surface.
-FunctionMetric contourMetric(std::function<double(const Vec3&)> sdf, double muMax)
+/// A stand-in for the structure-tensor metric, sampled on a sparse NanoVDB grid like the one
+/// vdb2mesh exports (same NanoMetric code path): within a few voxels of the surface, lengths
+/// across the contour (along the sdf gradient) are multiplied by up to sqrt(muMax).
+struct MetricGrids {
+    nanovdb::GridHandle<> diag, off;
+    std::unique_ptr<NanoMetric> metric;
+};
+
+MetricGrids contourMetric(const std::function<double(const Vec3&)>& sdf, const Box3& bounds, double muMax)
 {
-    return FunctionMetric(
-        [sdf, muMax](const Vec3& x) {
-            const double d = sdf(x);
-            const double w = std::exp(-d * d / 8.0);
-            if (w < 1e-3) return Mat3(Mat3::Identity());
-            Vec3 g;
-            for (int a = 0; a < 3; ++a) {
-                Vec3 e = Vec3::Zero();
-                e[a] = 0.5;
-                g[a] = sdf(x + e) - sdf(x - e);
-            }
-            const double n = g.norm();
-            if (!(n > 0)) return Mat3(Mat3::Identity());
-            g /= n;
-            return Mat3(Mat3::Identity() + (muMax - 1.0) * w * g * g.transpose());
-        },
-        muMax);
+    auto tensor = [&](const nanovdb::Coord& ijk) {
+        const Vec3 x(ijk[0], ijk[1], ijk[2]);
+        const double d = sdf(x);
+        const double w = std::exp(-d * d / 8.0);
+        if (w < 1e-3) return Mat3(Mat3::Identity());
+        Vec3 g;
+        for (int a = 0; a < 3; ++a) {
+            Vec3 e = Vec3::Zero();
+            e[a] = 0.5;
+            g[a] = sdf(x + e) - sdf(x - e);
+        }
+        if (!(g.norm() > 0)) return Mat3(Mat3::Identity());
+        g.normalize();
+        return Mat3(Mat3::Identity() + (muMax - 1.0) * w * g * g.transpose());
+    };
+    const nanovdb::CoordBBox box(nanovdb::Coord(int(bounds.min().x()), int(bounds.min().y()), int(bounds.min().z())),
+                                 nanovdb::Coord(int(bounds.max().x()), int(bounds.max().y()), int(bounds.max().z())));
+    nanovdb::GridBuilder<nanovdb::Vec3f> diag(nanovdb::Vec3f(1, 1, 1)), off(nanovdb::Vec3f(0, 0, 0));
+    diag([&](const nanovdb::Coord& ijk) {
+        const Mat3 g = tensor(ijk);
+        return nanovdb::Vec3f(float(g(0, 0)), float(g(1, 1)), float(g(2, 2)));
+    }, box);
+    off([&](const nanovdb::Coord& ijk) {
+        const Mat3 g = tensor(ijk);
+        return nanovdb::Vec3f(float(g(0, 1)), float(g(0, 2)), float(g(1, 2)));
+    }, box);
+    MetricGrids grids;
+    grids.diag = diag.getHandle<>(1.0, nanovdb::Vec3d(0), kMetricDiagGrid);
+    grids.off = off.getHandle<>(1.0, nanovdb::Vec3d(0), kMetricOffGrid);
+    grids.metric = std::make_unique<NanoMetric>(grids.diag.grid<nanovdb::Vec3f>(), grids.off.grid<nanovdb::Vec3f>(), muMax);
+    return grids;
 }
 
 double now()
@@ -129,8 +164,9 @@ void fullRuns(bool quick)
                 o.delta = riemannian ? 3.0 * scale : 1.5 * scale;
                 o.maxIterations = 3000;
                 EuclideanMetric euclidean;
-                auto contour = contourMetric(s.sdf, 9.0);
-                const MetricField& metric = riemannian ? static_cast<const MetricField&>(contour) : euclidean;
+                MetricGrids contour;
+                if (riemannian) contour = contourMetric(s.sdf, s.bounds, 9.0);
+                const MetricField& metric = riemannian ? static_cast<const MetricField&>(*contour.metric) : euclidean;
                 Mesh mesh = makeInitialBox(image, 2.0 * o.delta);
                 const auto stats = evolve(mesh, image, metric, o);
                 const auto t = topologyOf(mesh);

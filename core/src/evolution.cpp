@@ -65,6 +65,7 @@ IterationStats Evolution::step()
     io.mass = o.mass;
     io.damping = o.damping;
     io.vmax = vmax;
+    io.movingSpeed = 0.5 * o.forces.externalLimit * o.delta / std::max(o.damping, 1e-9); // half the terminal speed F/gamma
     const IntegrationStats is = integrate(mMesh, mForces, io);
 
     RegularityOptions ro;
@@ -92,12 +93,18 @@ IterationStats Evolution::step()
     if (mLastCut > 0 && iteration - mLastCut <= 60)
         removed = removeSmallComponents(mMesh, 6, 0.5 * o.delta * o.delta * o.delta);
 
-    if (rs.collapses || ts.merges || ts.cuts || removed) mMesh.garbage_collection();
+    // Compaction is O(n) and costly in OpenMesh: deleted elements are skipped by every iterator, so
+    // compact only once they pile up (or after a topology edit, which deletes whole one-rings).
+    std::size_t live = 0;
+    for (auto v : mMesh.vertices()) { (void)v; ++live; }
+    if (ts.merges || ts.cuts || removed || mMesh.n_vertices() - live > mMesh.n_vertices() / 20)
+        mMesh.garbage_collection();
 
     it.iteration = iteration;
     it.removedComponents = removed;
-    it.vertices = mMesh.n_vertices();
+    it.vertices = live;
     it.meanKineticEnergy = is.meanKineticEnergy;
+    it.moving = is.moving;
     it.splits = rs.splits;
     it.collapses = rs.collapses;
     it.flips = rs.flips;
@@ -130,6 +137,9 @@ void Evolution::updateConvergence()
     for (int i = n - 2 * w; i < n - w; ++i) previous += mHistory[i].meanKineticEnergy / scale;
     recent /= w;
     previous /= w;
+    // Still travelling somewhere: not converged, whatever the mean says.
+    for (int i = n - w; i < n; ++i)
+        if (double(mHistory[i].moving) > o.movingFraction * double(mHistory[i].vertices)) return;
     if (peak < o.energyThreshold) { mReason = StopReason::Converged; return; }
     // Stabilised: low energy (well below free-flight speed), no topology change and a nearly constant
     // vertex count over the last window, and energy no longer decreasing.

@@ -31,7 +31,9 @@ IntegrationStats integrate(Mesh& mesh, const std::vector<Vec3>& forces, const In
         mesh.point(v) += toPoint(d);
         mesh.property(velocity, v) = toPoint(u);
         energy += 0.5 * options.mass * u.squaredNorm();
-        stats.maxDisplacement = std::max(stats.maxDisplacement, d.norm());
+        const double step = d.norm();
+        stats.maxDisplacement = std::max(stats.maxDisplacement, step);
+        if (step > options.movingSpeed) ++stats.moving;
         ++count;
     }
     stats.meanKineticEnergy = count ? energy / double(count) : 0.0;

@@ -22,6 +22,7 @@ struct IterationStats {
     int iteration = 0;
     std::size_t vertices = 0;
     double meanKineticEnergy = 0;
+    std::size_t moving = 0; ///< vertices still travelling (faster than half the free-flight speed)
     int splits = 0, collapses = 0, flips = 0, merges = 0, cuts = 0;
     int removedComponents = 0; ///< specks left by cuts and deleted (see removeSmallComponents)
     double milliseconds = 0;
@@ -39,12 +40,16 @@ struct EvolutionOptions {
     double damping = 0.5;
     int maxIterations = 3000;
     int minIterations = 20;
-    /// Converged when the mean kinetic energy, relative to delta^2, stays below energyThreshold
-    /// over convergenceWindow iterations, or its relative change over the window is below
-    /// relativeChange while no topology event happened.
+    /// Converged when no vertex is still travelling (faster than half the free-flight speed; at most
+    /// movingFraction of them) over convergenceWindow iterations and either the mean kinetic energy,
+    /// relative to delta^2, stays below energyThreshold, or it has stabilised (relative change over
+    /// the window below relativeChange, no topology event, nearly constant vertex count).
+    /// The mean alone is not enough: a few hundred vertices filling a cavity through a hole barely
+    /// move the mean of a mesh at rest elsewhere.
     double energyThreshold = 1e-5;
     int convergenceWindow = 25;
     double relativeChange = 0.02;
+    double movingFraction = 0.001;
     std::size_t maxVertices = 4'000'000; ///< stop with VertexCap beyond this
     /// Called after every iteration; return false to interrupt.
     std::function<bool(const IterationStats&)> progress;

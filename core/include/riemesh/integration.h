@@ -12,11 +12,13 @@ struct IntegrationOptions {
     double damping = 0.5;  ///< gamma
     double timeStep = 1.0; ///< dt (iterations)
     double vmax = 0.5;     ///< largest displacement per iteration (world units); clamps every step
+    double movingSpeed = 0; ///< displacements above this count as "moving" (world units per iteration)
 };
 
 struct IntegrationStats {
     double meanKineticEnergy = 0; ///< mean of m |v|^2 / 2 over vertices (world units^2 per iteration^2)
     double maxDisplacement = 0;   ///< largest displacement this step (world units), <= vmax
+    std::size_t moving = 0;       ///< vertices displaced by more than movingSpeed
 };
 
 /// Updates velocities (the mesh's velocity property) and positions from `forces` (indexed by
