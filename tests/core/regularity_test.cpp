@@ -12,6 +12,7 @@
 #include <array>
 #include <chrono>
 #include <cmath>
+#include <random>
 #include <stdexcept>
 #include <vector>
 
@@ -297,6 +298,42 @@ TEST_CASE("regularity: a short edge around a valence-3 dent is collapsed, not re
     CHECK(stats.collapses >= 2);
     CHECK(mesh.status(x).deleted());
     checkRegular(mesh, metric, options, stats, 2);
+}
+
+TEST_CASE("regularity: a jittered surface stays valid and regular iteration after iteration")
+{
+    // Like the evolution: vertices move (here: noise and a swirl), then regularity, then compaction.
+    Mat3 g = Mat3::Identity();
+    g(2, 2) = 4.0;
+    const ConstantMetric anisotropic(g);
+    const EuclideanMetric euclidean;
+    const MetricField* metrics[2] = {&euclidean, &anisotropic};
+    for (const MetricField* metric : metrics) {
+        Mesh mesh = makeTorus(Vec3::Zero(), 8.0, 3.0, 24, 12);
+        std::mt19937 rng(2003);
+        std::normal_distribution<double> noise(0.0, 1.0);
+        RegularityOptions options;
+        options.delta = 0.7;
+        options.maxPasses = 2;
+        for (int it = 0; it < 40; ++it) {
+            const double swirl = 0.02 * std::sin(0.2 * it);
+            for (auto v : mesh.vertices()) {
+                const Vec3 p = position(mesh, v);
+                const Vec3 jitter(noise(rng), noise(rng), noise(rng));
+                mesh.set_point(v, toPoint(p + 0.05 * jitter + swirl * Vec3(p.y(), -p.x(), 0.3 * p.z())));
+            }
+            const auto stats = enforceRegularity(mesh, *metric, options);
+            CAPTURE(it);
+            REQUIRE_MESH_OK(mesh);
+            REQUIRE(topologyOf(mesh).euler == 0);
+            CHECK(stats.tunnels.empty()); // the tube is thick: no short edge closes a tunnel
+            mesh.garbage_collection();
+        }
+        const auto stats = enforceRegularity(mesh, *metric, options);
+        const OutOfRange count = countOutOfRange(mesh, *metric, options);
+        CHECK(stats.tooLong == 0);
+        CHECK(double(count.tooShort) < 0.05 * count.edges);
+    }
 }
 
 TEST_CASE("regularity: one call on an already regular 5k-vertex mesh takes well under a millisecond")
