@@ -8,7 +8,12 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <functional>
+#include <limits>
+#include <queue>
+#include <random>
 #include <set>
+#include <string>
 #include <utility>
 
 using namespace riemesh;
@@ -60,6 +65,127 @@ double timeFindCollisionsMs(const Mesh& mesh, const MetricField& metric, const C
     return best;
 }
 
+
+/// Brute-force O(n^2) reference for findCollisions: the documented predicate evaluated on every
+/// pair of live vertices, with the same floating-point formulas (area-weighted normals summed face
+/// by face, squared distances, a plain Dijkstra for the mesh neighbourhood).
+std::vector<CollisionPair> referenceCollisions(const Mesh& mesh, const MetricField& metric, const CollisionOptions& o)
+{
+    const double radius = collisionRadius(metric, o);
+    const std::size_t n = mesh.n_vertices();
+    std::vector<Vec3> normal(n, Vec3::Zero());
+    for (auto f : mesh.faces()) {
+        const HalfedgeHandle h0 = mesh.halfedge_handle(f);
+        const HalfedgeHandle h1 = mesh.next_halfedge_handle(h0);
+        const VertexHandle a = mesh.from_vertex_handle(h0), b = mesh.to_vertex_handle(h0), c = mesh.to_vertex_handle(h1);
+        const Vec3 pa = position(mesh, a);
+        const Vec3 fn = (position(mesh, b) - pa).cross(position(mesh, c) - pa);
+        normal[a.idx()] += fn;
+        normal[b.idx()] += fn;
+        normal[c.idx()] += fn;
+    }
+    for (Vec3& nv : normal) {
+        const double len = nv.norm();
+        nv *= len > 0 ? 1.0 / len : 0.0;
+    }
+    OpenMesh::VPropHandleT<int> cutId;
+    const bool hasCutIds = mesh.get_property_handle(cutId, kCutIdProperty);
+    std::vector<VertexHandle> live;
+    for (auto v : mesh.vertices()) live.push_back(v);
+
+    // Plain Dijkstra: vertices within `bound` of `source` along edges (Euclidean lengths).
+    auto within = [&](VertexHandle source, double bound) {
+        std::vector<double> dist(n, std::numeric_limits<double>::infinity());
+        std::vector<char> done(n, 0);
+        using Item = std::pair<double, int>;
+        std::priority_queue<Item, std::vector<Item>, std::greater<Item>> queue;
+        dist[source.idx()] = 0;
+        queue.emplace(0.0, source.idx());
+        while (!queue.empty()) {
+            const auto [d, i] = queue.top();
+            queue.pop();
+            if (done[i]) continue;
+            done[i] = 1;
+            const Mesh::Point& p = mesh.point(VertexHandle(i));
+            for (auto h : mesh.voh_range(VertexHandle(i))) {
+                const VertexHandle w = mesh.to_vertex_handle(h);
+                if (mesh.status(w).deleted()) continue;
+                const double dw = d + (mesh.point(w) - p).norm();
+                if (dw <= bound && dw < dist[w.idx()]) {
+                    dist[w.idx()] = dw;
+                    queue.emplace(dw, w.idx());
+                }
+            }
+        }
+        return done;
+    };
+
+    std::vector<CollisionPair> result;
+    const double r2 = radius * radius;
+    for (std::size_t i = 0; i < live.size(); ++i) {
+        const VertexHandle u = live[i];
+        const Vec3 pu = position(mesh, u), nu = normal[u.idx()];
+        std::vector<char> reached;
+        for (std::size_t j = i + 1; j < live.size(); ++j) {
+            const VertexHandle w = live[j];
+            const Vec3 pw = position(mesh, w), nw = normal[w.idx()];
+            const double dx = pw.x() - pu.x(), dy = pw.y() - pu.y(), dz = pw.z() - pu.z();
+            const double d2 = dx * dx + dy * dy + dz * dz;
+            if (!(d2 <= r2)) continue;
+            const double agree = nu.x() * nw.x() + nu.y() * nw.y() + nu.z() * nw.z();
+            const double hu = dx * nu.x() + dy * nu.y() + dz * nu.z();
+            const double hw = dx * nw.x() + dy * nw.y() + dz * nw.z();
+            const double limit = 0.25 * d2;
+            if (agree > 0.5 && hu * hu <= limit && hw * hw <= limit) continue; // same sheet
+            if (agree > -0.5 && hu < 0 && hw > 0) continue;                      // convex crease
+            if (hasCutIds) {
+                const int cu = mesh.property(cutId, u);
+                if (cu != 0 && cu == mesh.property(cutId, w)) continue;
+            }
+            double distance = std::sqrt(d2);
+            if (!metric.isEuclidean()) {
+                distance = metricLength(metric, pu, pw);
+                if (distance > radius) continue;
+            }
+            if (reached.empty()) reached = within(u, o.neighbourhoodFactor * radius);
+            if (reached[w.idx()]) continue;
+            result.push_back({VertexHandle(std::min(u.idx(), w.idx())), VertexHandle(std::max(u.idx(), w.idx())), distance});
+        }
+    }
+    std::sort(result.begin(), result.end(), [](const CollisionPair& x, const CollisionPair& y) {
+        if (x.distance != y.distance) return x.distance < y.distance;
+        return x.u.idx() != y.u.idx() ? x.u.idx() < y.u.idx() : x.w.idx() < y.w.idx();
+    });
+    return result;
+}
+
+/// Moves every live vertex by a uniform random offset in [-amount, amount]^3 (world units).
+void jitter(Mesh& mesh, double amount, std::mt19937& rng)
+{
+    std::uniform_real_distribution<double> u(-amount, amount);
+    for (auto v : mesh.vertices()) mesh.point(v) += Mesh::Point(u(rng), u(rng), u(rng));
+}
+
+Mesh translated(Mesh mesh, const Vec3& t)
+{
+    for (auto v : mesh.vertices()) mesh.point(v) += toPoint(t);
+    return mesh;
+}
+
+/// Checks findCollisions against the reference, pair by pair; returns the number of pairs.
+std::size_t checkAgainstReference(const Mesh& mesh, const MetricField& metric, const CollisionOptions& o)
+{
+    const auto fast = findCollisions(mesh, metric, o);
+    const auto slow = referenceCollisions(mesh, metric, o);
+    REQUIRE(fast.size() == slow.size());
+    for (std::size_t i = 0; i < fast.size(); ++i) {
+        INFO("pair " << i << " of " << fast.size());
+        CHECK(fast[i].u == slow[i].u);
+        CHECK(fast[i].w == slow[i].w);
+        CHECK(fast[i].distance == slow[i].distance);
+    }
+    return fast.size();
+}
 } // namespace
 
 TEST_CASE("collision: lambda follows eq. 4 (Euclidean) and the Riemannian bound")
@@ -188,6 +314,81 @@ TEST_CASE("collision: deleted vertices are ignored")
     for (auto v : mesh.vertices())
         if (std::size_t(v.idx()) >= nA) mesh.delete_vertex(v, false);
     CHECK(findCollisions(mesh, EuclideanMetric(), o).empty());
+}
+
+TEST_CASE("collision: same pairs as a brute-force reference on perturbed and folded meshes")
+{
+    std::mt19937 rng(20030);
+    std::vector<std::pair<std::string, Mesh>> meshes;
+    {
+        Mesh m = makeRegularSphere(Vec3(0.3, -0.2, 0.1), 3, 1.0);
+        jitter(m, 0.3, rng);
+        meshes.emplace_back("perturbed sphere", std::move(m));
+    }
+    {
+        // A sphere flattened into a pancake: its two faces are close across the gap, and meet
+        // (close along the mesh too) at the rim.
+        Mesh m = makeRegularSphere(Vec3(-2.5, 1.0, 0.5), 4, 1.0);
+        const double r = (position(m, *m.vertices().begin()) - Vec3(-2.5, 1.0, 0.5)).norm();
+        for (auto v : m.vertices()) m.point(v)[2] = 0.5 + (m.point(v)[2] - 0.5) * 1.6 / r;
+        jitter(m, 0.1, rng);
+        meshes.emplace_back("pancake", std::move(m));
+    }
+    {
+        Mesh m = makeRegularSphere(Vec3::Zero(), 3, 1.0);
+        const double r = (m.point(*m.vertices().begin()) - Mesh::Point(0, 0, 0)).norm();
+        appendMesh(m, makeRegularSphere(Vec3(2 * r + 1.2, 0.7, -0.4), 3, 1.0));
+        jitter(m, 0.25, rng);
+        meshes.emplace_back("two spheres close together", std::move(m));
+    }
+    {
+        Mesh m = makeRegularTorus(Vec3(1, 2, 3), 4.0, 1.2, 0.8);
+        jitter(m, 0.2, rng);
+        meshes.emplace_back("perturbed torus", std::move(m));
+    }
+    {
+        Mesh m = makeBox(Vec3(-3, -4, -1), Vec3(9, 7, 0.6), 1.0);
+        jitter(m, 0.15, rng);
+        meshes.emplace_back("thin plate", std::move(m));
+    }
+    {
+        // Far from the origin and far apart: a sparse cell grid.
+        Mesh m = translated(makeRegularSphere(Vec3::Zero(), 2, 1.0), Vec3(-1500, 20, 3));
+        appendMesh(m, translated(makeRegularSphere(Vec3::Zero(), 2, 1.0), Vec3(2500, -700, 900)));
+        appendMesh(m, translated(makeRegularSphere(Vec3::Zero(), 2, 1.0), Vec3(2504.5, -700, 900)));
+        jitter(m, 0.3, rng);
+        meshes.emplace_back("far apart", std::move(m));
+    }
+    {
+        // Deleted vertices and cut ids: both must be ignored exactly as documented.
+        Mesh m = makeRegularSphere(Vec3::Zero(), 2, 1.0);
+        const double r = (m.point(*m.vertices().begin()) - Mesh::Point(0, 0, 0)).norm();
+        const std::size_t nA = m.n_vertices();
+        appendMesh(m, makeRegularSphere(Vec3(2 * r + 0.6, 0, 0), 2, 1.0));
+        appendMesh(m, makeRegularSphere(Vec3(0, 2 * r + 0.6, 0), 2, 1.0));
+        jitter(m, 0.2, rng);
+        OpenMesh::VPropHandleT<int> cutId;
+        m.add_property(cutId, kCutIdProperty);
+        for (auto v : m.vertices()) m.property(cutId, v) = position(m, v).x() > 0.5 * r ? 7 : 0;
+        std::vector<VertexHandle> doomed;
+        for (auto v : m.vertices())
+            if (std::size_t(v.idx()) >= nA && position(m, v).y() > 2 * r + 0.6) doomed.push_back(v);
+        for (auto v : doomed) m.delete_vertex(v, false);
+        meshes.emplace_back("deleted vertices and cut ids", std::move(m));
+    }
+    const auto metrics = testMetrics();
+    std::size_t reported = 0;
+    for (const auto& [name, mesh] : meshes) {
+        for (double deltaScale : {1.0, 1.6}) {
+            CollisionOptions o = optionsFor(mesh);
+            o.delta *= deltaScale; // a larger radius: more candidates, more mesh searches
+            for (const auto& metric : metrics) {
+                INFO(name << ", delta x" << deltaScale << ", euclidean " << metric->isEuclidean());
+                reported += checkAgainstReference(mesh, *metric, o);
+            }
+        }
+    }
+    CHECK(reported > 5000); // the fixtures do collide (pancake, plate, close spheres)
 }
 
 TEST_CASE("collision: timing on icospheres with edge ~ delta and no collisions")
