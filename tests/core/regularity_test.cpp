@@ -10,7 +10,6 @@
 
 #include <algorithm>
 #include <array>
-#include <chrono>
 #include <cmath>
 #include <random>
 #include <stdexcept>
@@ -336,9 +335,10 @@ TEST_CASE("regularity: a jittered surface stays valid and regular iteration afte
     }
 }
 
-TEST_CASE("regularity: one call on an already regular 5k-vertex mesh takes well under a millisecond")
+TEST_CASE("regularity: an already regular 5k-vertex mesh is left untouched, Euclidean or not")
 {
-    // Refine an icosphere to ~5,000 vertices, then time calls that find nothing to do.
+    // Refine an icosphere to ~5,000 vertices, then call again: nothing to do. (Speed is measured in
+    // bench/, not here.)
     Mesh mesh = makeIcosphere(Vec3::Zero(), 10.0, 3);
     RegularityOptions options;
     options.delta = 0.32;
@@ -349,24 +349,9 @@ TEST_CASE("regularity: one call on an already regular 5k-vertex mesh takes well 
     CHECK(vertices > 4500u);
     CHECK(vertices < 5500u);
     const FunctionMetric function([](const Vec3&) { return Mat3(Mat3::Identity()); }, 1.0);
-    auto medianMilliseconds = [&](const MetricField& metric) {
-        std::vector<double> times;
-        for (int k = 0; k < 21; ++k) {
-            const auto t0 = std::chrono::steady_clock::now();
-            const auto stats = enforceRegularity(mesh, metric, options);
-            const auto t1 = std::chrono::steady_clock::now();
-            CHECK(stats.splits + stats.collapses + stats.flips == 0);
-            times.push_back(std::chrono::duration<double, std::milli>(t1 - t0).count());
-        }
-        std::nth_element(times.begin(), times.begin() + 10, times.end());
-        return times[10];
-    };
-    const double euclideanMs = medianMilliseconds(euclidean);
-    const double functionMs = medianMilliseconds(function);
-    MESSAGE(vertices << " vertices: Euclidean " << euclideanMs << " ms, FunctionMetric " << functionMs << " ms");
-#ifdef NDEBUG
-    // Loose bounds (the machine may be busy): they catch a quadratic or allocating hot loop.
-    CHECK(euclideanMs < 5.0);
-    CHECK(functionMs < 10.0);
-#endif
+    for (const MetricField* metric : {static_cast<const MetricField*>(&euclidean), static_cast<const MetricField*>(&function)}) {
+        const auto stats = enforceRegularity(mesh, *metric, options);
+        CHECK(stats.splits + stats.collapses + stats.flips == 0);
+    }
+    CHECK_MESH_OK(mesh);
 }
