@@ -1,8 +1,9 @@
 // collision.cpp: self-collision detection (paper 3.2, Fig. 2).
 //
-// One pass over the faces for vertex normals, one spatial-hash pass for Euclidean candidates
+// One pass over the faces for vertex normals, one sorted-grid sweep for Euclidean candidates
 // (d_E <= d_R since G >= I), then cheap per-pair filters; the bounded mesh search that tells
 // "close along the mesh" from "close across a gap" only runs for the few pairs that survive.
+// Per call, nothing is allocated once the thread's scratch buffers have grown to the mesh size.
 #include "riemesh/collision.h"
 
 #include "detail/mesh_walk.h"
@@ -10,6 +11,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdint>
 #include <stdexcept>
 
 namespace riemesh {
@@ -28,6 +30,31 @@ constexpr double kSquaredTangentSlope = 0.25; // (sin 30 degrees)^2
 /// They cannot be colliding sheets unless the normals are nearly opposite (a thin plate, which
 /// the paper does report under a coarse Euclidean metric).
 constexpr double kCreaseAgreement = -0.5; // cos 120 degrees
+
+/// Candidates that no cheap test rules out; ordered (u < w by index).
+struct Candidate {
+    int u, w;
+    double distance; // metric length (world units)
+};
+
+/// Per-thread buffers reused across calls (no allocation per call in steady state).
+struct Scratch {
+    std::vector<double> normal;  ///< 3 per vertex index, area-weighted sums
+    std::vector<double> xyz;     ///< 3 per live vertex, in vertex order
+    std::vector<int> live;       ///< vertex index of each live vertex
+    std::vector<double> soa;     ///< 6 arrays of `count` in slot order: x y z nx ny nz
+    std::vector<int> id;         ///< vertex index of each slot
+    std::vector<std::uint32_t> near; ///< slots within the radius of the current one
+    std::vector<Candidate> candidates;
+    detail::CellGrid grid;
+    detail::BoundedPathSearch search;
+};
+
+Scratch& scratch()
+{
+    thread_local Scratch s;
+    return s;
+}
 
 } // namespace
 
@@ -53,81 +80,120 @@ std::vector<CollisionPair> findCollisions(const Mesh& mesh, const MetricField& m
         throw std::invalid_argument("findCollisions: call prepareMesh() first (status attributes)");
     const double radius = collisionRadius(metric, options);
     const std::size_t n = mesh.n_vertices();
+    Scratch& S = scratch();
 
     // Area-weighted vertex normals in one pass over the faces.
-    std::vector<Vec3> normal(n, Vec3::Zero());
-    for (auto f : mesh.faces()) {
+    S.normal.assign(3 * n, 0.0);
+    double* const normal = S.normal.data();
+    const Mesh::Point* const point = mesh.points();
+    const std::size_t faceCount = mesh.n_faces();
+    for (std::size_t fi = 0; fi < faceCount; ++fi) {
+        const FaceHandle f{int(fi)};
+        if (mesh.status(f).deleted()) continue;
         const HalfedgeHandle h0 = mesh.halfedge_handle(f);
         const HalfedgeHandle h1 = mesh.next_halfedge_handle(h0);
-        const VertexHandle a = mesh.from_vertex_handle(h0), b = mesh.to_vertex_handle(h0),
-                           c = mesh.to_vertex_handle(h1);
-        const Vec3 pa = position(mesh, a);
-        const Vec3 fn = (position(mesh, b) - pa).cross(position(mesh, c) - pa);
-        normal[a.idx()] += fn;
-        normal[b.idx()] += fn;
-        normal[c.idx()] += fn;
+        const int a = mesh.from_vertex_handle(h0).idx(), b = mesh.to_vertex_handle(h0).idx(),
+                  c = mesh.to_vertex_handle(h1).idx();
+        const Mesh::Point& pa = point[a];
+        const double ex = point[b][0] - pa[0], ey = point[b][1] - pa[1], ez = point[b][2] - pa[2];
+        const double gx = point[c][0] - pa[0], gy = point[c][1] - pa[1], gz = point[c][2] - pa[2];
+        const double fx = ey * gz - ez * gy, fy = ez * gx - ex * gz, fz = ex * gy - ey * gx;
+        for (const int v : {a, b, c}) {
+            normal[3 * v] += fx;
+            normal[3 * v + 1] += fy;
+            normal[3 * v + 2] += fz;
+        }
     }
 
-    std::vector<Vec3> points;
-    std::vector<int> ids;
-    points.reserve(n);
-    ids.reserve(n);
-    for (auto v : mesh.vertices()) {
-        points.push_back(position(mesh, v));
-        ids.push_back(v.idx());
+    // Live vertices, in index order.
+    S.xyz.resize(3 * n);
+    S.live.resize(n);
+    std::size_t count = 0;
+    for (std::size_t i = 0; i < n; ++i) {
+        if (mesh.status(VertexHandle(int(i))).deleted()) continue;
+        S.xyz[3 * count] = point[i][0];
+        S.xyz[3 * count + 1] = point[i][1];
+        S.xyz[3 * count + 2] = point[i][2];
+        S.live[count++] = int(i);
     }
-    if (points.empty()) return result;
+    if (count == 0) return result;
 
     OpenMesh::VPropHandleT<int> cutId;
     const bool hasCutIds = mesh.get_property_handle(cutId, kCutIdProperty);
 
-    detail::SpatialHash hash;
-    hash.build(points, ids, radius);
+    detail::CellGrid& grid = S.grid;
+    grid.build(S.xyz.data(), count, radius);
 
-    // Candidates that no cheap test rules out; ordered (u < w by index).
-    struct Candidate {
-        int u, w;
-        double distance; // metric length (world units)
-    };
-    std::vector<Candidate> candidates;
-
-    // Structure-of-arrays copies in slot order, so that the pair loop below is branch-free except
-    // for the (rare) pairs that survive the cheap tests.
-    const std::size_t count = hash.size();
-    std::vector<double> px(count), py(count), pz(count), nx(count), ny(count), nz(count);
+    // Structure-of-arrays copies in slot order (unit normals; zero for isolated vertices).
+    S.soa.resize(6 * count);
+    S.id.resize(count);
+    double* const qx = S.soa.data();
+    double* const qy = qx + count;
+    double* const qz = qy + count;
+    double* const mx = qz + count;
+    double* const my = mx + count;
+    double* const mz = my + count;
+    int* const ids = S.id.data();
     for (std::uint32_t s = 0; s < count; ++s) {
-        const Vec3& p = hash.point(s);
-        const Vec3& nv = normal[hash.id(s)];
-        const double len = nv.norm();
-        const double inv = len > 0 ? 1.0 / len : 0.0; // unit normal (zero for isolated vertices)
-        px[s] = p.x(); py[s] = p.y(); pz[s] = p.z();
-        nx[s] = nv.x() * inv; ny[s] = nv.y() * inv; nz[s] = nv.z() * inv;
+        const std::uint32_t i = grid.index(s);
+        const int v = S.live[i];
+        ids[s] = v;
+        qx[s] = S.xyz[3 * i];
+        qy[s] = S.xyz[3 * i + 1];
+        qz[s] = S.xyz[3 * i + 2];
+        const double nx = normal[3 * v], ny = normal[3 * v + 1], nz = normal[3 * v + 2];
+        const double len = std::sqrt(nx * nx + ny * ny + nz * nz);
+        const double inv = len > 0 ? 1.0 / len : 0.0;
+        mx[s] = nx * inv;
+        my[s] = ny * inv;
+        mz[s] = nz * inv;
     }
+    const double* const qw = S.soa.data() + std::size_t(grid.sweepAxis()) * count; // sweep coordinate
+
+    S.candidates.clear();
+    S.near.resize(count);
+    std::uint32_t* const near = S.near.data();
     const double r2 = radius * radius;
+    // Sweep-coordinate window, slightly widened so that it never drops a pair the exact squared
+    // distance test below would keep.
+    const double window = radius * (1 + 1e-9) + 1e-300;
+    const bool euclidean = metric.isEuclidean();
     auto consider = [&](std::uint32_t sa, std::uint32_t sb, double d2) {
-        const int a = hash.id(sa), b = hash.id(sb);
-        const VertexHandle va(a), vb(b);
+        const int a = ids[sa], b = ids[sb];
         if (hasCutIds) {
-            const int ca = mesh.property(cutId, va);
-            if (ca != 0 && ca == mesh.property(cutId, vb)) return;
+            const int ca = mesh.property(cutId, VertexHandle(a));
+            if (ca != 0 && ca == mesh.property(cutId, VertexHandle(b))) return;
         }
+        const int u = std::min(a, b), w = std::max(a, b);
         double dR = std::sqrt(d2);
-        if (!metric.isEuclidean()) {
-            dR = metricLength(metric, hash.point(sa), hash.point(sb));
+        if (!euclidean) {
+            dR = metricLength(metric, position(mesh, VertexHandle(u)), position(mesh, VertexHandle(w)));
             if (dR > radius) return;
         }
-        candidates.push_back({std::min(a, b), std::max(a, b), dR});
+        S.candidates.push_back({u, w, dR});
     };
-    const double* const qx = px.data(); // raw pointers: no reload after a candidate push_back
-    const double* const qy = py.data();
-    const double* const qz = pz.data();
-    const double* const mx = nx.data();
-    const double* const my = ny.data();
-    const double* const mz = nz.data();
-    hash.forEachCellPair([&](std::uint32_t a0, std::uint32_t a1, std::uint32_t b0, std::uint32_t b1) {
+    grid.forEachCellRange([&](std::uint32_t a0, std::uint32_t a1, std::uint32_t b0, std::uint32_t b1) {
+        const bool self = a0 == b0;
+        std::uint32_t lo = b0;
         for (std::uint32_t s = a0; s < a1; ++s) {
-            const double x = qx[s], y = qy[s], z = qz[s], ux = mx[s], uy = my[s], uz = mz[s];
-            for (std::uint32_t t = (a0 == b0 ? s + 1 : b0); t < b1; ++t) {
+            const double x = qx[s], y = qy[s], z = qz[s], ws = qw[s];
+            // Runs are sorted by the sweep coordinate: the pairs within the radius of s lie in
+            // [lo, hi) with lo, hi increasing along s.
+            if (self) {
+                lo = s + 1;
+            } else {
+                while (lo < b1 && qw[lo] < ws - window) ++lo;
+            }
+            std::uint32_t k = 0;
+            for (std::uint32_t t = lo; t < b1 && qw[t] <= ws + window; ++t) {
+                const double dx = qx[t] - x, dy = qy[t] - y, dz = qz[t] - z;
+                near[k] = t;
+                k += (dx * dx + dy * dy + dz * dz <= r2);
+            }
+            if (k == 0) continue;
+            const double ux = mx[s], uy = my[s], uz = mz[s];
+            for (std::uint32_t j = 0; j < k; ++j) {
+                const std::uint32_t t = near[j];
                 const double dx = qx[t] - x, dy = qy[t] - y, dz = qz[t] - z;
                 const double d2 = dx * dx + dy * dy + dz * dz;
                 const double agree = ux * mx[t] + uy * my[t] + uz * mz[t];
@@ -138,18 +204,18 @@ std::vector<CollisionPair> findCollisions(const Mesh& mesh, const MetricField& m
                 // Convex crease: each vertex behind the other's tangent plane and the normals
                 // less than 120 degrees apart (a thin plate has opposite normals and stays in).
                 const bool crease = (agree > kCreaseAgreement) & (hu < 0) & (hw > 0);
-                const bool sameSheet = flat | crease;
-                if ((d2 <= r2) & !sameSheet) consider(s, t, d2);
+                if (!(flat | crease)) consider(s, t, d2);
             }
         }
     });
+    std::vector<Candidate>& candidates = S.candidates;
     if (candidates.empty()) return result;
 
     // Exclude pairs close along the mesh: one bounded search per distinct source vertex.
     std::sort(candidates.begin(), candidates.end(),
               [](const Candidate& x, const Candidate& y) { return x.u != y.u ? x.u < y.u : x.w < y.w; });
     const double pathBound = options.neighbourhoodFactor * radius;
-    detail::BoundedPathSearch search;
+    detail::BoundedPathSearch& search = S.search;
     int source = -1;
     for (const Candidate& c : candidates) {
         if (c.u != source) {

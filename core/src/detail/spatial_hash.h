@@ -1,102 +1,77 @@
 // detail/spatial_hash.h: a uniform-grid broad phase for fixed-radius neighbour pairs.
 //
-// Points are binned into cubic cells of side `cellSize` (world units). Each cell gets a 64-bit key
-// (three 21-bit coordinates); keys are hashed into a power-of-two table and the points are
-// counting-sorted by bucket, then by key inside each bucket, into flat arrays (no per-cell
-// containers, O(n) build), so every occupied cell is one contiguous run. Each pair closer than
-// the cell size is enumerated exactly once from its cell's run by a half stencil of 14 cells (the
-// cell itself and its 13 "forward" neighbours); hash collisions are resolved by comparing keys.
+// Points are binned into cubic cells of side `cellSize` (world units) and sorted by cell, with no
+// hash table: the grid's longest axis is the "sweep" axis, the other two index rows of cells.
+// Slots are ordered by row, then by the cell's sweep coordinate, then (inside a cell) by the
+// point's exact sweep coordinate. Every pair of points closer than the cell size lies in one cell
+// pair of the half stencil (the cell itself, its +1 sweep neighbour, and the 3 cells nearest to it
+// in each of 4 forward rows), and each such group is one contiguous run of slots sorted by sweep
+// coordinate. Since cell keys increase along the slots, the start of each forward row's run is
+// found by a pointer that only moves forward (a merge, O(1) amortised per cell). The build is two
+// counting sorts (sweep cell, then row) and one insertion pass (points inside a cell), O(n),
+// falling back to a comparison sort when the occupied box is sparse (cells >> points).
 #pragma once
 
-#include <Eigen/Core>
-
-#include <array>
+#include <cstddef>
 #include <cstdint>
 #include <vector>
 
 namespace riemesh::detail {
 
-class SpatialHash {
+class CellGrid {
 public:
-    /// Bins `points` (world space). `ids[i]` is reported for points[i]; `normals` (optional, empty
-    /// or one per point) is stored beside the points so pair filters read contiguous memory.
-    /// `cellSize` > 0 (world units); points must lie within 2^20 cells of the origin on each axis.
-    void build(const std::vector<Eigen::Vector3d>& points, const std::vector<int>& ids, double cellSize,
-               const std::vector<Eigen::Vector3d>& normals = {});
+    /// Bins `n` points given as interleaved coordinates (x0 y0 z0 x1 ...; world units) into cells
+    /// of side `cellSize` > 0. Throws std::invalid_argument for a bad size, non-finite points or a
+    /// grid wider than 2^20 cells on an axis. Buffers are kept for the next build.
+    void build(const double* xyz, std::size_t n, double cellSize);
 
-    /// Calls f(a0, a1, b0, b1) once for every pair of neighbouring occupied cells (the half
-    /// stencil), with the slot ranges [a0, a1) and [b0, b1) of their points; for a cell paired
-    /// with itself the two ranges are equal (pair slot s only with slots t > s then). Every pair
-    /// of points closer than the cell size lies in exactly one such call.
+    std::size_t size() const { return mOrder.size(); }
+    /// The input index of slot s.
+    std::uint32_t index(std::uint32_t s) const { return mOrder[s]; }
+    /// The sweep axis (0, 1, 2): each run passed by forEachCellRange is sorted by this coordinate.
+    int sweepAxis() const { return mSweep; }
+
+    /// For every occupied cell with slots [a0, a1): calls f(a0, a1, a0, b1) once, where [a0, b1)
+    /// covers the cell and its +1 neighbour along the sweep axis (pair slot s with t in (s, b1)),
+    /// and f(a0, a1, b0, b1) for each forward row with occupied cells near it ([b0, b1): the
+    /// three cells of the row at sweep offsets -1, 0, +1; pair every s with every t). Every pair
+    /// of points closer than the cell size meets in exactly one call; all ranges are sorted by the
+    /// sweep coordinate.
     template <class F>
-    void forEachCellPair(F&& f) const
+    void forEachCellRange(F&& f) const
     {
-        for (std::size_t c = 0; c + 1 < mCellStart.size(); ++c) {
-            const std::uint32_t s0 = mCellStart[c], s1 = mCellStart[c + 1];
-            f(s0, s1, s0, s1);
-            const std::uint64_t key = mKeys[s0];
-            for (const std::uint64_t offset : kForwardOffsets) {
-                std::uint32_t t0 = 0, t1 = 0;
-                if (findCell(key + offset, t0, t1)) f(s0, s1, t0, t1);
+        const std::size_t cells = mCellStart.size() - 1;
+        if (cells == 0) return;
+        const std::uint64_t* key = mCellKey.data(); // key[cells] is a sentinel above every key
+        const std::uint32_t* start = mCellStart.data();
+        std::size_t lo[4] = {0, 0, 0, 0}, hi[4] = {0, 0, 0, 0};
+        for (std::size_t c = 0; c < cells; ++c) {
+            const std::uint64_t k = key[c];
+            const std::uint32_t a0 = start[c], a1 = start[c + 1];
+            f(a0, a1, a0, key[c + 1] == k + 1 ? start[c + 2] : a1);
+            for (int r = 0; r < 4; ++r) {
+                const std::uint64_t first = k + mRowStep[r] - 1, last = first + 2;
+                std::size_t l = lo[r];
+                while (key[l] < first) ++l;
+                lo[r] = l;
+                std::size_t h = hi[r] > l ? hi[r] : l;
+                while (key[h] <= last) ++h;
+                hi[r] = h;
+                if (h > l) f(a0, a1, start[l], start[h]);
             }
         }
     }
 
-    /// Calls f(slotA, slotB, squaredDistance) once for every unordered pair of distinct points
-    /// with squared Euclidean distance <= radius^2 (world units; radius <= the cell size). Slots
-    /// index id(), point() and normal().
-    template <class F>
-    void forEachPairWithin(double radius, F&& f) const
-    {
-        const double r2 = radius * radius;
-        forEachCellPair([&](std::uint32_t a0, std::uint32_t a1, std::uint32_t b0, std::uint32_t b1) {
-            for (std::uint32_t s = a0; s < a1; ++s) {
-                const Eigen::Vector3d& p = mPoints[s];
-                for (std::uint32_t t = (a0 == b0 ? s + 1 : b0); t < b1; ++t) {
-                    const double d2 = (mPoints[t] - p).squaredNorm();
-                    if (d2 <= r2) f(s, t, d2);
-                }
-            }
-        });
-    }
-
-    std::size_t size() const { return mPoints.size(); }
-    int id(std::uint32_t slot) const { return mIds[slot]; }
-    const Eigen::Vector3d& point(std::uint32_t slot) const { return mPoints[slot]; }
-    const Eigen::Vector3d& normal(std::uint32_t slot) const { return mNormals[slot]; }
-
 private:
-    static constexpr int kBits = 21;
-    static constexpr std::int64_t kBias = std::int64_t(1) << (kBits - 1);
-    static const std::array<std::uint64_t, 13> kForwardOffsets;
-
-    std::uint32_t bucketOf(std::uint64_t key) const
-    {
-        return std::uint32_t((key * 0x9E3779B97F4A7C15ull) >> mShift);
-    }
-    /// The run [t0, t1) of the points of cell `key`; false when the cell is empty.
-    bool findCell(std::uint64_t key, std::uint32_t& t0, std::uint32_t& t1) const
-    {
-        const std::uint32_t b = bucketOf(key);
-        if (!(mOccupied[b >> 6] >> (b & 63) & 1u)) return false; // most stencil cells are empty
-        std::uint32_t t = mBucketStart[b];
-        const std::uint32_t end = mBucketStart[b + 1];
-        while (t < end && mKeys[t] < key) ++t;
-        if (t == end || mKeys[t] != key) return false;
-        t0 = t;
-        while (t < end && mKeys[t] == key) ++t;
-        t1 = t;
-        return true;
-    }
-
-    int mShift = 60;
-    std::vector<std::uint32_t> mBucketStart; ///< bucket b holds sorted slots [start[b], start[b+1])
-    std::vector<std::uint64_t> mOccupied;    ///< one bit per bucket: non-empty (small, stays in cache)
-    std::vector<std::uint32_t> mCellStart;   ///< occupied cell c holds slots [start[c], start[c+1])
-    std::vector<Eigen::Vector3d> mPoints;    ///< positions in sorted order (world units)
-    std::vector<std::uint64_t> mKeys;        ///< packed cell coordinates in sorted order
-    std::vector<int> mIds;                   ///< caller ids in sorted order
-    std::vector<Eigen::Vector3d> mNormals;   ///< caller normals in sorted order (may be empty)
+    int mSweep = 2;
+    std::uint64_t mRowStep[4] = {0, 0, 0, 0}; ///< key offsets of the 4 forward rows (same sweep cell)
+    std::vector<std::uint64_t> mCellKey;      ///< occupied cells in increasing key order, then a sentinel
+    std::vector<std::uint32_t> mCellStart;    ///< cell c holds slots [start[c], start[c+1])
+    std::vector<std::uint32_t> mOrder;        ///< slot -> input index
+    // Scratch, kept between builds.
+    std::vector<std::int64_t> mCoord;         ///< 3 cell coordinates per point
+    std::vector<std::uint64_t> mRow, mSortKey;
+    std::vector<std::uint32_t> mSweepCell, mCount, mTmp;
 };
 
 } // namespace riemesh::detail
