@@ -20,8 +20,11 @@ double metricLength(const MetricField& metric, const Vec3& u, const Vec3& v)
 double metricLength(const MetricField& metric, const Mesh& mesh, EdgeHandle e)
 {
     auto h = mesh.halfedge_handle(e, 0);
-    return metricLength(metric, position(mesh, mesh.from_vertex_handle(h)),
-                        position(mesh, mesh.to_vertex_handle(h)));
+    const Vec3 u = position(mesh, mesh.from_vertex_handle(h)), v = position(mesh, mesh.to_vertex_handle(h));
+    const Vec3 d = v - u;
+    if (metric.isEuclidean()) return d.norm();
+    const Mat3 g = 0.5 * (metric.at(u) + metric.at(v));
+    return std::sqrt(std::max(0.0, d.dot(g * d)));
 }
 
 ConstantMetric::ConstantMetric(const Mat3& g) : mG(g)

@@ -71,8 +71,40 @@ public:
     double length(EdgeHandle e) const
     {
         const HalfedgeHandle h = mMesh.halfedge_handle(e, 0);
-        return metricLength(mMetric, position(mMesh, mMesh.from_vertex_handle(h)),
-                            position(mMesh, mMesh.to_vertex_handle(h)));
+        return lengthBetween(mMesh.from_vertex_handle(h), mMesh.to_vertex_handle(h));
+    }
+
+    /// G at vertex v, sampled once per call and cached by vertex index (a collapse that moves the
+    /// kept vertex forgets it). Sampling a metric grid costs two trilinear lookups; edges are measured
+    /// many times per call, vertices move only through collapses.
+    const Mat3& vertexMetric(VertexHandle v) const
+    {
+        const std::size_t i = std::size_t(v.idx());
+        if (i >= mHaveG.size()) {
+            mHaveG.resize(mMesh.n_vertices(), 0);
+            mG.resize(mMesh.n_vertices());
+        }
+        if (!mHaveG[i]) {
+            mG[i] = mMetric.at(position(mMesh, v));
+            mHaveG[i] = 1;
+        }
+        return mG[i];
+    }
+
+    void forgetMetric(VertexHandle v)
+    {
+        if (std::size_t(v.idx()) < mHaveG.size()) mHaveG[std::size_t(v.idx())] = 0;
+    }
+
+    /// Metric length between two vertices with G at the edge midpoint approximated by the mean of
+    /// the endpoint tensors (second order in the edge length for a smooth metric; exact for a
+    /// constant one), so that measuring an edge costs no metric lookup.
+    double lengthBetween(VertexHandle a, VertexHandle b) const
+    {
+        const Vec3 d = position(mMesh, b) - position(mMesh, a);
+        if (mMetric.isEuclidean()) return d.norm();
+        const Mat3 g = 0.5 * (vertexMetric(a) + vertexMetric(b));
+        return std::sqrt(std::max(0.0, d.dot(g * d)));
     }
 
     /// Measures every edge once, queues the long and the short ones and counts the valences.
@@ -196,8 +228,8 @@ public:
             if (after > before) continue;
             const Vec3 pu = position(mMesh, u), pv = position(mMesh, v);
             const Vec3 pa = position(mMesh, a), pb = position(mMesh, b);
-            if (after == before && !violatesDelaunay(pu, pv, pa, pb)) continue;
-            const double newLength = metricLength(mMetric, pa, pb);
+            if (after == before && !violatesDelaunay(u, v, pu, pv, pa, pb)) continue;
+            const double newLength = lengthBetween(a, b);
             if (newLength < mLo || newLength > mHi) continue;
             // Do not fold the surface: the new dihedral may not be sharper than the old one (or ~26 deg).
             const Vec3 n1 = (pv - pu).cross(pa - pu), n2 = (pu - pv).cross(pb - pv);
@@ -281,6 +313,7 @@ private:
     void collapseAndRequeue(HalfedgeHandle hh, const Vec3& target)
     {
         const VertexHandle kept = detail::collapseUnchecked(mMesh, hh, target);
+        forgetMetric(kept);
         ++mCollapses;
         mValenceValid = false;
         for (auto oh = mMesh.cvoh_begin(kept); oh.is_valid(); ++oh) {
@@ -359,11 +392,15 @@ private:
     /// length): refusing those collapses avoids split/collapse oscillation.
     bool keepsEdgesShortEnough(VertexHandle u, VertexHandle v, const Vec3& target) const
     {
+        const bool euclidean = mMetric.isEuclidean();
+        const Mat3 gTarget = euclidean ? Mat3(Mat3::Identity()) : mMetric.at(target);
         const VertexHandle ends[2] = {u, v};
         for (const VertexHandle end : ends) {
             for (auto n = mMesh.cvv_begin(end); n.is_valid(); ++n) {
                 if (*n == u || *n == v) continue;
-                if (metricLength(mMetric, target, position(mMesh, *n)) > mHi) return false;
+                const Vec3 d = position(mMesh, *n) - target;
+                const double l2 = euclidean ? d.squaredNorm() : d.dot((0.5 * (gTarget + vertexMetric(*n))) * d);
+                if (l2 > mHi * mHi) return false;
             }
         }
         return true;
@@ -384,11 +421,12 @@ private:
 
     /// True when the angles opposite edge u-v (at a and b), measured with G at the edge midpoint,
     /// sum to more than pi by a margin: flipping to a-b makes the pair Delaunay-like.
-    bool violatesDelaunay(const Vec3& pu, const Vec3& pv, const Vec3& pa, const Vec3& pb) const
+    bool violatesDelaunay(VertexHandle u, VertexHandle v, const Vec3& pu, const Vec3& pv, const Vec3& pa,
+                          const Vec3& pb) const
     {
         Mat3 g;
         const bool euclidean = mMetric.isEuclidean();
-        if (!euclidean) g = mMetric.at(0.5 * (pu + pv));
+        if (!euclidean) g = 0.5 * (vertexMetric(u) + vertexMetric(v));
         auto dot = [&](const Vec3& x, const Vec3& y) { return euclidean ? x.dot(y) : x.dot(g * y); };
         // cot of the angle between x and y: <x,y> / sqrt(|x|^2 |y|^2 - <x,y>^2) (Gram determinant).
         auto cot = [&](const Vec3& x, const Vec3& y) {
@@ -405,6 +443,8 @@ private:
     double mHi; ///< zeta * delta (metric length)
     std::vector<QueuedEdge> mLong, mShort;
     std::vector<int> mValence; ///< by vertex idx(), kept up to date during the flip sweep
+    mutable std::vector<Mat3> mG;       ///< G at each vertex (see vertexMetric), by vertex idx()
+    mutable std::vector<char> mHaveG;   ///< mG[i] is up to date
     bool mValenceValid = false; ///< mValence matches the mesh (no split or collapse since it was counted)
     int mCollapses = 0;             ///< collapses of the current collapse stage
     std::vector<VertexHandle> mCap; ///< the vertices of a small cap being dissolved

@@ -62,3 +62,15 @@ TEST_CASE("image: function image uses its exact gradient when given")
                       [](const Vec3& x) { return Vec3(2 * x); });
     CHECK(img.gradient(Vec3(1, 2, 3)).isApprox(Vec3(2, 4, 6)));
 }
+
+TEST_CASE("metric: a mesh edge is measured with the mean of the endpoint tensors")
+{
+    FunctionMetric m([](const Vec3& x) { return x.x() > 0 ? Mat3(Mat3::Identity() * 4.0) : Mat3(Mat3::Identity()); }, 4.0);
+    Mesh mesh;
+    const auto a = mesh.add_vertex(Mesh::Point(-1, 0, 0));
+    const auto b = mesh.add_vertex(Mesh::Point(1, 0, 0));
+    const auto c = mesh.add_vertex(Mesh::Point(0, 1, 0));
+    mesh.add_face(a, b, c);
+    const auto e = mesh.edge_handle(mesh.find_halfedge(a, b));
+    CHECK(metricLength(m, mesh, e) == doctest::Approx(2.0 * std::sqrt(2.5)));
+}

@@ -29,7 +29,10 @@ public:
 /// Metric length of the segment u-v (world-space points), with G taken at the midpoint.
 double metricLength(const MetricField& metric, const Vec3& u, const Vec3& v);
 
-/// Metric length of edge e of `mesh`.
+/// Metric length of edge e of `mesh`, with G at the midpoint approximated by the mean of G at the
+/// two endpoints (second order in the edge length; exact for a constant metric). This is the
+/// length the regularity step keeps within [delta, zeta*delta]: it samples G once per vertex
+/// instead of once per edge measurement.
 double metricLength(const MetricField& metric, const Mesh& mesh, EdgeHandle e);
 
 /// G = I.

@@ -25,6 +25,8 @@ struct RegularityStats {
     std::vector<TunnelCandidate> tunnels;
 };
 
+/// Edge lengths are metric lengths with G at the edge midpoint approximated by the mean of the
+/// endpoint tensors (G is sampled once per vertex per call).
 /// Splits long edges, collapses short ones and flips for valence/angle quality, until every edge
 /// is within [delta, zeta*delta] (metric length) or maxPasses is reached.
 RegularityStats enforceRegularity(Mesh& mesh, const MetricField& metric, const RegularityOptions& options = {});
