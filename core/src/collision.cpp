@@ -98,11 +98,12 @@ std::vector<CollisionPair> findCollisions(const Mesh& mesh, const MetricField& m
         const double ex = point[b][0] - pa[0], ey = point[b][1] - pa[1], ez = point[b][2] - pa[2];
         const double gx = point[c][0] - pa[0], gy = point[c][1] - pa[1], gz = point[c][2] - pa[2];
         const double fx = ey * gz - ez * gy, fy = ez * gx - ex * gz, fz = ex * gy - ey * gx;
-        for (const int v : {a, b, c}) {
-            normal[3 * v] += fx;
-            normal[3 * v + 1] += fy;
-            normal[3 * v + 2] += fz;
-        }
+        double* const na = normal + 3 * a;
+        double* const nb = normal + 3 * b;
+        double* const nc = normal + 3 * c;
+        na[0] += fx, na[1] += fy, na[2] += fz;
+        nb[0] += fx, nb[1] += fy, nb[2] += fz;
+        nc[0] += fx, nc[1] += fy, nc[2] += fz;
     }
 
     // Live vertices, in index order.

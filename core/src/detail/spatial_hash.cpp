@@ -31,9 +31,10 @@ void CellGrid::build(const double* xyz, std::size_t n, double cellSize)
     }
     for (std::size_t i = 0; i < 3 * n; i += 3) {
         for (int a = 0; a < 3; ++a) {
-            const double c = std::floor(xyz[i + a] * inv);
+            const double c = xyz[i + a] * inv;
             if (!(std::abs(c) < kLimit)) throw std::invalid_argument("CellGrid: point not finite or too far for the cell size");
-            const std::int64_t k = std::int64_t(c);
+            std::int64_t k = std::int64_t(c); // floor: truncation, minus one below zero unless exact
+            k -= c < double(k);
             mCoord[i + a] = k;
             lo[a] = std::min(lo[a], k);
             hi[a] = std::max(hi[a], k);
