@@ -503,7 +503,11 @@ void App::drawPanels()
     ImGui::Text("vertices %zu  faces %zu", mTopology.vertices, mTopology.faces);
     ImGui::Text("components %d  genus %d", mTopology.components, mTopology.genus);
     ImGui::Text("merges %d  cuts %d  compute %.2f s", mMerges, mCuts, mComputeSeconds);
-    ImGui::Text("frame %.1f ms", mLastFrameMs);
+    ImGui::Text("frame %.0f ms (model + UI %.0f ms)", mFrameInterval * 1e3, mLastFrameMs);
+    if (mColour == ColourMode::MetricEdgeLength)
+        ImGui::TextDisabled("colour: metric edge length / delta, 1 (purple) .. zeta (yellow)");
+    else if (mColour == ColourMode::LocalResolution)
+        ImGui::TextDisabled("colour: edge length in voxels, fine (purple) .. coarse (yellow)");
 
     // --- plots
     if (ImGui::CollapsingHeader("Plots", ImGuiTreeNodeFlags_DefaultOpen)) {
@@ -511,10 +515,11 @@ void App::drawPanels()
         const int shown = std::min(n, 400);
         char overlay[64];
         std::snprintf(overlay, sizeof overlay, "log10 E/delta^2 = %.2f", n ? mEnergyLog.back() : 0.f);
-        ImGui::PlotLines("##energy", mEnergyLog.data() + (n - shown), shown, 0, overlay, FLT_MAX, FLT_MAX, ImVec2(-1, 60));
+        const float plotWidth = ImGui::GetWindowWidth() - 2 * ImGui::GetStyle().WindowPadding.x;
+        ImGui::PlotLines("##energy", mEnergyLog.data() + (n - shown), shown, 0, overlay, FLT_MAX, FLT_MAX, ImVec2(plotWidth, 60));
         ImGui::TextDisabled("mean kinetic energy per iteration");
         ImGui::PlotHistogram("##lengths", mHistogram.data(), int(mHistogram.size()), 0, "edge length / delta",
-                             0.f, mHistogramMax * 1.1f, ImVec2(-1, 50));
+                             0.f, mHistogramMax * 1.1f, ImVec2(plotWidth, 50));
         ImGui::TextDisabled("0 .. 1.5 zeta; the band [1, zeta] is the regular one");
     }
 
@@ -607,9 +612,9 @@ std::string App::stateJson() const
     char buffer[512];
     std::snprintf(buffer, sizeof buffer,
                   "{\"iteration\": %d, \"vertices\": %zu, \"components\": %d, \"genus\": %d, \"playing\": %s, "
-                  "\"state\": \"%s\", \"computeSeconds\": %.4f, \"merges\": %d, \"cuts\": %d, \"volume\": \"%s\"}",
+                  "\"state\": \"%s\", \"computeSeconds\": %.4f, \"frameMs\": %.2f, \"merges\": %d, \"cuts\": %d, \"volume\": \"%s\"}",
                   mIteration, mTopology.vertices, mTopology.components, mTopology.genus, mPlaying ? "true" : "false",
-                  stateName(), mComputeSeconds, mMerges, mCuts, name.c_str());
+                  stateName(), mComputeSeconds, mFrameInterval * 1e3, mMerges, mCuts, name.c_str());
     return buffer;
 }
 
@@ -633,6 +638,8 @@ bool App::setParameter(const std::string& name, double value)
 void App::frame(double budgetMs, int width, int height)
 {
     const double start = nowSeconds();
+    if (mLastFrameStart > 0) mFrameInterval = 0.9 * mFrameInterval + 0.1 * (start - mLastFrameStart);
+    mLastFrameStart = start;
     advance(budgetMs);
     handleCameraInput(width, height);
     drawPanels();

@@ -142,6 +142,7 @@ private:
     std::string mMessage;
     std::optional<std::string> mDownload;
     double mLastFrameMs = 0;
+    double mLastFrameStart = 0, mFrameInterval = 0; ///< seconds, smoothed
 
     void installVolume(std::unique_ptr<NanoVolume> volume, std::unique_ptr<ScalarImage> image,
                        std::unique_ptr<MetricField> metric, const std::string& name);

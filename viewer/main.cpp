@@ -94,7 +94,7 @@ void frame()
     ImGui_ImplOpenGL3_NewFrame();
     ImGui_ImplGlfw_NewFrame();
     ImGui::NewFrame();
-    v.app.frame(10.0, width, height); // at most ~10 ms of evolution per frame: the UI never freezes
+    v.app.frame(25.0, width, height); // at most ~25 ms of evolution per frame: the UI never freezes
     ImGui::Render();
 
     v.renderer->draw(v.app.scene(), width, height);
@@ -168,7 +168,9 @@ int run(int argc, char** argv)
     glfwWindowHint(GLFW_CONTEXT_VERSION_MINOR, 3);
     glfwWindowHint(GLFW_OPENGL_PROFILE, GLFW_OPENGL_CORE_PROFILE);
 #endif
-    glfwWindowHint(GLFW_SAMPLES, 4);
+#ifndef __EMSCRIPTEN__
+    glfwWindowHint(GLFW_SAMPLES, 4); // (not on the web: multisampling is slow in software WebGL)
+#endif
     v.window = glfwCreateWindow(1280, 800, "riemesh", nullptr, nullptr);
     if (!v.window) throw std::runtime_error("cannot create an OpenGL 3.3 window");
     glfwMakeContextCurrent(v.window);
