@@ -40,7 +40,6 @@ struct Candidate {
 /// Per-thread buffers reused across calls (no allocation per call in steady state).
 struct Scratch {
     std::vector<double> normal;  ///< 3 per vertex index, area-weighted sums
-    std::vector<double> xyz;     ///< 3 per live vertex, in vertex order
     std::vector<int> live;       ///< vertex index of each live vertex
     std::vector<double> soa;     ///< 6 arrays of `count` in slot order: x y z nx ny nz
     std::vector<int> id;         ///< vertex index of each slot
@@ -106,24 +105,23 @@ std::vector<CollisionPair> findCollisions(const Mesh& mesh, const MetricField& m
         nc[0] += fx, nc[1] += fy, nc[2] += fz;
     }
 
-    // Live vertices, in index order.
-    S.xyz.resize(3 * n);
+    // Live vertices: straight from the mesh's point array unless some are deleted.
+    static_assert(sizeof(Mesh::Point) == 3 * sizeof(double), "points are 3 packed doubles");
     S.live.resize(n);
     std::size_t count = 0;
     for (std::size_t i = 0; i < n; ++i) {
-        if (mesh.status(VertexHandle(int(i))).deleted()) continue;
-        S.xyz[3 * count] = point[i][0];
-        S.xyz[3 * count + 1] = point[i][1];
-        S.xyz[3 * count + 2] = point[i][2];
-        S.live[count++] = int(i);
+        S.live[count] = int(i);
+        count += !mesh.status(VertexHandle(int(i))).deleted();
     }
     if (count == 0) return result;
+    const double* const xyz = point[0].data();
+    const int* const live = count < n ? S.live.data() : nullptr;
 
     OpenMesh::VPropHandleT<int> cutId;
     const bool hasCutIds = mesh.get_property_handle(cutId, kCutIdProperty);
 
     detail::CellGrid& grid = S.grid;
-    grid.build(S.xyz.data(), count, radius);
+    grid.build(xyz, live, count, radius);
 
     // Structure-of-arrays copies in slot order (unit normals; zero for isolated vertices).
     S.soa.resize(6 * count);
@@ -137,11 +135,11 @@ std::vector<CollisionPair> findCollisions(const Mesh& mesh, const MetricField& m
     int* const ids = S.id.data();
     for (std::uint32_t s = 0; s < count; ++s) {
         const std::uint32_t i = grid.index(s);
-        const int v = S.live[i];
+        const int v = live ? live[i] : int(i);
         ids[s] = v;
-        qx[s] = S.xyz[3 * i];
-        qy[s] = S.xyz[3 * i + 1];
-        qz[s] = S.xyz[3 * i + 2];
+        qx[s] = xyz[3 * v];
+        qy[s] = xyz[3 * v + 1];
+        qz[s] = xyz[3 * v + 2];
         const double nx = normal[3 * v], ny = normal[3 * v + 1], nz = normal[3 * v + 2];
         const double len = std::sqrt(nx * nx + ny * ny + nz * nz);
         const double inv = len > 0 ? 1.0 / len : 0.0;
@@ -149,15 +147,11 @@ std::vector<CollisionPair> findCollisions(const Mesh& mesh, const MetricField& m
         my[s] = ny * inv;
         mz[s] = nz * inv;
     }
-    const double* const qw = S.soa.data() + std::size_t(grid.sweepAxis()) * count; // sweep coordinate
 
     S.candidates.clear();
     S.near.resize(count);
     std::uint32_t* const near = S.near.data();
     const double r2 = radius * radius;
-    // Sweep-coordinate window, slightly widened so that it never drops a pair the exact squared
-    // distance test below would keep.
-    const double window = radius * (1 + 1e-9) + 1e-300;
     const bool euclidean = metric.isEuclidean();
     auto consider = [&](std::uint32_t sa, std::uint32_t sb, double d2) {
         const int a = ids[sa], b = ids[sb];
@@ -174,19 +168,11 @@ std::vector<CollisionPair> findCollisions(const Mesh& mesh, const MetricField& m
         S.candidates.push_back({u, w, dR});
     };
     grid.forEachCellRange([&](std::uint32_t a0, std::uint32_t a1, std::uint32_t b0, std::uint32_t b1) {
-        const bool self = a0 == b0;
-        std::uint32_t lo = b0;
         for (std::uint32_t s = a0; s < a1; ++s) {
-            const double x = qx[s], y = qy[s], z = qz[s], ws = qw[s];
-            // Runs are sorted by the sweep coordinate: the pairs within the radius of s lie in
-            // [lo, hi) with lo, hi increasing along s.
-            if (self) {
-                lo = s + 1;
-            } else {
-                while (lo < b1 && qw[lo] < ws - window) ++lo;
-            }
+            const double x = qx[s], y = qy[s], z = qz[s];
+            // Squared distances first (branch-free), the sheet tests only for the few within reach.
             std::uint32_t k = 0;
-            for (std::uint32_t t = lo; t < b1 && qw[t] <= ws + window; ++t) {
+            for (std::uint32_t t = (a0 == b0 ? s + 1 : b0); t < b1; ++t) {
                 const double dx = qx[t] - x, dy = qy[t] - y, dz = qz[t] - z;
                 near[k] = t;
                 k += (dx * dx + dy * dy + dz * dz <= r2);

@@ -1,15 +1,14 @@
 // detail/spatial_hash.h: a uniform-grid broad phase for fixed-radius neighbour pairs.
 //
 // Points are binned into cubic cells of side `cellSize` (world units) and sorted by cell, with no
-// hash table: the grid's longest axis is the "sweep" axis, the other two index rows of cells.
-// Slots are ordered by row, then by the cell's sweep coordinate, then (inside a cell) by the
-// point's exact sweep coordinate. Every pair of points closer than the cell size lies in one cell
-// pair of the half stencil (the cell itself, its +1 sweep neighbour, and the 3 cells nearest to it
-// in each of 4 forward rows), and each such group is one contiguous run of slots sorted by sweep
-// coordinate. Since cell keys increase along the slots, the start of each forward row's run is
-// found by a pointer that only moves forward (a merge, O(1) amortised per cell). The build is two
-// counting sorts (sweep cell, then row) and one insertion pass (points inside a cell), O(n),
-// falling back to a comparison sort when the occupied box is sparse (cells >> points).
+// hash table: the grid's longest axis is the "sweep" axis, the other two index rows of cells, and
+// slots are ordered by row, then by the cell's sweep coordinate (ties keep the input order). Every
+// pair of points closer than the cell size lies in one cell pair of the half stencil (the cell
+// itself, its +1 sweep neighbour, and the 3 cells nearest to it in each of 4 forward rows), and
+// each such group of cells is one contiguous run of slots. Since cell keys increase along the
+// slots, the start of each forward row's run is found by a pointer that only moves forward (a
+// merge, O(1) amortised per cell). The build is two counting sorts (sweep cell, then row), O(n),
+// falling back to a comparison sort when the occupied box is sparse (many more cells than points).
 #pragma once
 
 #include <cstddef>
@@ -20,23 +19,21 @@ namespace riemesh::detail {
 
 class CellGrid {
 public:
-    /// Bins `n` points given as interleaved coordinates (x0 y0 z0 x1 ...; world units) into cells
-    /// of side `cellSize` > 0. Throws std::invalid_argument for a bad size, non-finite points or a
-    /// grid wider than 2^20 cells on an axis. Buffers are kept for the next build.
-    void build(const double* xyz, std::size_t n, double cellSize);
+    /// Bins `n` points into cells of side `cellSize` > 0 (world units). Point i is the three
+    /// coordinates at xyz + 3 * (index ? index[i] : i). Throws std::invalid_argument for a bad
+    /// size, non-finite points or a grid wider than 2^20 cells on an axis. Buffers are kept for
+    /// the next build (no allocation once they have grown).
+    void build(const double* xyz, const int* index, std::size_t n, double cellSize);
 
     std::size_t size() const { return mOrder.size(); }
-    /// The input index of slot s.
+    /// The input position i (0 <= i < n) of slot s.
     std::uint32_t index(std::uint32_t s) const { return mOrder[s]; }
-    /// The sweep axis (0, 1, 2): each run passed by forEachCellRange is sorted by this coordinate.
-    int sweepAxis() const { return mSweep; }
 
     /// For every occupied cell with slots [a0, a1): calls f(a0, a1, a0, b1) once, where [a0, b1)
     /// covers the cell and its +1 neighbour along the sweep axis (pair slot s with t in (s, b1)),
     /// and f(a0, a1, b0, b1) for each forward row with occupied cells near it ([b0, b1): the
     /// three cells of the row at sweep offsets -1, 0, +1; pair every s with every t). Every pair
-    /// of points closer than the cell size meets in exactly one call; all ranges are sorted by the
-    /// sweep coordinate.
+    /// of points closer than the cell size meets in exactly one call.
     template <class F>
     void forEachCellRange(F&& f) const
     {
@@ -63,15 +60,13 @@ public:
     }
 
 private:
-    int mSweep = 2;
     std::uint64_t mRowStep[4] = {0, 0, 0, 0}; ///< key offsets of the 4 forward rows (same sweep cell)
     std::vector<std::uint64_t> mCellKey;      ///< occupied cells in increasing key order, then a sentinel
     std::vector<std::uint32_t> mCellStart;    ///< cell c holds slots [start[c], start[c+1])
-    std::vector<std::uint32_t> mOrder;        ///< slot -> input index
+    std::vector<std::uint32_t> mOrder;        ///< slot -> input position
     // Scratch, kept between builds.
-    std::vector<std::int64_t> mCoord;         ///< 3 cell coordinates per point
-    std::vector<std::uint64_t> mRow, mSortKey;
-    std::vector<std::uint32_t> mSweepCell, mCount, mTmp;
+    std::vector<std::uint32_t> mRow, mSweepCell, mCount, mTmp;
+    std::vector<std::uint64_t> mSortKey;
 };
 
 } // namespace riemesh::detail
