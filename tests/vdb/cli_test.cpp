@@ -3,6 +3,8 @@
 #include "riemesh/vdb/io.h"
 #include "riemesh/vdb/phantom.h"
 
+#include <openvdb/io/File.h>
+
 #include <doctest/doctest.h>
 
 #include <sys/wait.h>
@@ -186,4 +188,56 @@ TEST_CASE("vdbphantom: writes density and sdf; bad shapes, numbers and folders e
         CHECK(r.err.find(c.expect) != std::string::npos);
     }
     CHECK_FALSE(fs::exists(f.path("c.vdb")));
+}
+
+TEST_CASE("vdb2mesh: a noisy ball phantom becomes one closed genus-0 mesh close to the true surface")
+{
+    Fixture f;
+    const Run made = f.run(RIEMESH_VDBPHANTOM_EXE, "ball " + f.path("ball.vdb") + " --size 32 --noise 0.3 --seed 5");
+    REQUIRE(made.code == 0);
+    const Run r = f.run(RIEMESH_VDB2MESH_EXE, f.path("ball.vdb") + " " + f.path("ball.ply") + " --reference " +
+                                                  f.path("ball.vdb") + " --stats " + f.path("ball.json") +
+                                                  " --export-nvdb " + f.path("ball.nvdb") + " --write-metric " +
+                                                  f.path("metric.vdb"));
+    INFO(r.err);
+    REQUIRE(r.code == 0);
+    CHECK(r.out.find("1 component, genus 0") != std::string::npos);
+    CHECK(lineCount(r.out) == 1);
+    CHECK(fs::file_size(f.path("ball.ply")) > 1000);
+    const std::string json = slurp(f.path("ball.json"));
+    CHECK(json.find("\"iterations\": [") != std::string::npos);
+    CHECK(json.find("\"genus\": 0") != std::string::npos);
+    CHECK(json.find("\"hausdorff_voxels\"") != std::string::npos);
+    {
+        openvdb::io::File metric(f.path("metric.vdb"));
+        metric.open();
+        auto grids = metric.getGrids();
+        REQUIRE(grids->size() == 2);
+        CHECK((*grids)[0]->getName() == "metric_diag");
+        CHECK((*grids)[1]->getName() == "metric_off");
+        CHECK((*grids)[0]->isType<openvdb::Vec3fGrid>());
+    }
+    // The exported .nvdb is an input too (with its metric); a .vdb output is the level set "surface".
+    const Run again = f.run(RIEMESH_VDB2MESH_EXE, f.path("ball.nvdb") + " " + f.path("surface.vdb") + " -q");
+    INFO(again.err);
+    CHECK(again.code == 0);
+    CHECK(again.out.empty());
+    auto surface = readVdbImage(f.path("surface.vdb"), "surface");
+    CHECK(gridClassName(*surface) == "levelset");
+    CHECK(surface->getConstAccessor().getValue(openvdb::Coord(15, 15, 15)) < 0);
+}
+
+TEST_CASE("vdb2mesh: SIGINT interrupts the run: exit 130, no output file, an existing one untouched")
+{
+    Fixture f;
+    REQUIRE(f.run(RIEMESH_VDBPHANTOM_EXE, "cube-cavity " + f.path("p.vdb") + " --noise 0.5").code == 0);
+    { std::ofstream(f.path("p.ply")) << "precious"; }
+    const std::size_t before = f.fileCount();
+    const Run r = f.run("timeout", "--preserve-status -s INT 1.5 '" + std::string(RIEMESH_VDB2MESH_EXE) + "' " +
+                                       f.path("p.vdb") + " " + f.path("p.ply") + " --max-iterations 100000");
+    INFO(r.err);
+    CHECK(r.code == 130);
+    CHECK(r.err.find("interrupted") != std::string::npos);
+    CHECK(slurp(f.path("p.ply")) == "precious");
+    CHECK(f.fileCount() == before);
 }

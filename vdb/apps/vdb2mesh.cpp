@@ -5,6 +5,7 @@
 #include "riemesh/vdb/volume.h"
 
 #include <atomic>
+#include <cctype>
 #include <cerrno>
 #include <chrono>
 #include <cmath>
@@ -257,6 +258,19 @@ private:
     std::chrono::steady_clock::time_point mLast{};
 };
 
+/// One printable line of at most ~300 characters, whatever an exception carried.
+std::string oneLine(const std::string& raw)
+{
+    std::string s;
+    for (char c : raw) {
+        const bool space = std::isspace(static_cast<unsigned char>(c)) || !std::isprint(static_cast<unsigned char>(c));
+        if (space && (s.empty() || s.back() == ' ')) continue;
+        s += space ? ' ' : c;
+        if (s.size() > 300) return s + "...";
+    }
+    return s;
+}
+
 double secondsSince(std::chrono::steady_clock::time_point t)
 {
     return std::chrono::duration<double>(std::chrono::steady_clock::now() - t).count();
@@ -345,7 +359,7 @@ int main(int argc, char** argv)
             throw BadInput(msg.str());
         }
     } catch (const std::exception& e) {
-        std::fprintf(stderr, "vdb2mesh: error: %s\n", e.what());
+        std::fprintf(stderr, "vdb2mesh: error: %s\n", oneLine(e.what()).c_str());
         return 1;
     }
 
@@ -483,7 +497,7 @@ int main(int argc, char** argv)
         }
         return 0;
     } catch (const std::exception& e) {
-        std::fprintf(stderr, "vdb2mesh: error: %s\n", e.what());
+        std::fprintf(stderr, "vdb2mesh: error: %s\n", oneLine(e.what()).c_str());
         return 2;
     }
 }

@@ -18,6 +18,7 @@
 #include <tbb/parallel_reduce.h>
 
 #include <algorithm>
+#include <cctype>
 #include <cmath>
 #include <filesystem>
 #include <mutex>
@@ -67,8 +68,20 @@ void checkReadableFile(const std::string& path)
 }
 
 /// Why a VDB read failed, in words: OpenVDB's messages are terse ("IoError: ...").
-std::string describeVdbFailure(const std::string& what)
+std::string describeVdbFailure(const std::string& raw)
 {
+    // A corrupt file can put megabytes of garbage into OpenVDB's message (e.g. a grid type name read
+    // from random bytes): keep it to one short printable line.
+    std::string what;
+    for (char c : raw) {
+        const bool space = std::isspace(static_cast<unsigned char>(c)) || !std::isprint(static_cast<unsigned char>(c));
+        if (space && (what.empty() || what.back() == ' ')) continue;
+        what += space ? ' ' : c;
+        if (what.size() > 160) {
+            what += "...";
+            break;
+        }
+    }
     std::string lower = what;
     std::transform(lower.begin(), lower.end(), lower.begin(), [](unsigned char c) { return std::tolower(c); });
     if (lower.find("not a vdb file") != std::string::npos || lower.find("magic") != std::string::npos)
