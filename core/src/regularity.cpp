@@ -77,7 +77,7 @@ public:
     /// G at vertex v, sampled once per call and cached by vertex index (a collapse that moves the
     /// kept vertex forgets it). Sampling a metric grid costs two trilinear lookups; edges are measured
     /// many times per call, vertices move only through collapses.
-    const Mat3& vertexMetric(VertexHandle v) const
+    Mat3 vertexMetric(VertexHandle v) const // by value: a later call may grow the cache
     {
         const std::size_t i = std::size_t(v.idx());
         if (i >= mHaveG.size()) {

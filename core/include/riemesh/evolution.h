@@ -49,7 +49,7 @@ struct EvolutionOptions {
     double energyThreshold = 1e-5;
     int convergenceWindow = 25;
     double relativeChange = 0.02;
-    double movingFraction = 0.001;
+    double movingFraction = 0.005; ///< noise keeps a few vertices jittering at rest
     std::size_t maxVertices = 4'000'000; ///< stop with VertexCap beyond this
     /// Called after every iteration; return false to interrupt.
     std::function<bool(const IterationStats&)> progress;
