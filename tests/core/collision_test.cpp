@@ -378,7 +378,10 @@ TEST_CASE("collision: same pairs as a brute-force reference on perturbed and fol
     }
     const auto metrics = testMetrics();
     std::size_t reported = 0;
-    for (const auto& [name, mesh] : meshes) {
+    for (const auto& entry : meshes) {
+        // not a structured binding: INFO captures `name` in a lambda (C++20; clang refuses it in C++17)
+        const auto& name = entry.first;
+        const auto& mesh = entry.second;
         for (double deltaScale : {1.0, 1.6}) {
             CollisionOptions o = optionsFor(mesh);
             o.delta *= deltaScale; // a larger radius: more candidates, more mesh searches
