@@ -53,13 +53,15 @@ void computeForces(const Mesh& mesh, const ScalarImage& image, const ForceOption
         // External: inflation/deflation toward I = iso along the normal. The signed distance to the
         // isosurface is estimated as (I - iso)/|grad I| (a Newton step) unless a fixed contrast is given;
         // the pull is stiff near the surface and saturates at externalLimit * delta.
-        const double value = image.value(x);
+        double value;
         double distance; // estimated signed distance to the isosurface (world units), > 0 inside
         if (options.contrast > 0) {
+            value = image.value(x);
             distance = delta * (value - options.iso) / options.contrast;
         } else {
-            const double g = image.gradient(x).norm();
-            distance = (value - options.iso) / std::max(g, 1e-12 / delta);
+            Vec3 gradient;
+            image.sample(x, value, gradient);
+            distance = (value - options.iso) / std::max(gradient.norm(), 1e-12 / delta);
         }
         const double limit = options.externalLimit * delta;
         const double push = std::max(-limit, std::min(limit, options.externalWeight * sign * distance));

@@ -1,5 +1,7 @@
 #include "riemesh/image.h"
 
+#include "detail/nano_stencil.h"
+
 #include <nanovdb/util/IO.h>
 #include <nanovdb/util/SampleFromVoxels.h>
 
@@ -68,9 +70,9 @@ Box3 DenseImage::bounds() const
     return Box3(mOrigin, mOrigin + mVoxelSize * Vec3(mN[0] - 1, mN[1] - 1, mN[2] - 1));
 }
 
-NanoImage::NanoImage(const nanovdb::FloatGrid* grid) : mGrid(grid)
+NanoImage::NanoImage(const nanovdb::FloatGrid* grid)
+    : mGrid(grid), mAccessor(grid ? grid->getAccessor() : throw std::invalid_argument("NanoImage: null grid"))
 {
-    if (!grid) throw std::invalid_argument("NanoImage: null grid");
     mVoxelSize = grid->voxelSize()[0];
     const auto bbox = grid->worldBBox();
     mBounds = Box3(Vec3(bbox.min()[0], bbox.min()[1], bbox.min()[2]),
@@ -81,19 +83,28 @@ NanoImage::~NanoImage() = default;
 
 double NanoImage::value(const Vec3& x) const
 {
-    const auto ijk = mGrid->worldToIndexF(nanovdb::Vec3f(float(x.x()), float(x.y()), float(x.z())));
-    auto acc = mGrid->getAccessor();
-    return nanovdb::createSampler<1>(acc)(ijk);
+    detail::Stencil<float> st;
+    detail::fetchStencil(mAccessor, mGrid->worldToIndex(nanovdb::Vec3d(x.x(), x.y(), x.z())), st);
+    return detail::trilinear(st);
 }
 
 Vec3 NanoImage::gradient(const Vec3& x) const
 {
-    // Gradient of the trilinear interpolant in index space, mapped to world space.
-    const auto ijk = mGrid->worldToIndexF(nanovdb::Vec3f(float(x.x()), float(x.y()), float(x.z())));
-    auto acc = mGrid->getAccessor();
-    const nanovdb::Vec3f g = nanovdb::createSampler<1>(acc).gradient(ijk);
-    const auto w = mGrid->indexToWorldGradF(g);
-    return Vec3(w[0], w[1], w[2]);
+    double value;
+    Vec3 g;
+    sample(x, value, g);
+    return g;
+}
+
+void NanoImage::sample(const Vec3& x, double& value, Vec3& gradient) const
+{
+    // Value and gradient of the trilinear interpolant from one 2x2x2 fetch; the gradient is mapped
+    // from index to world space by the grid's transform.
+    detail::Stencil<float> st;
+    detail::fetchStencil(mAccessor, mGrid->worldToIndex(nanovdb::Vec3d(x.x(), x.y(), x.z())), st);
+    value = detail::trilinear(st);
+    const nanovdb::Vec3d w = mGrid->indexToWorldGrad(detail::trilinearGradient(st));
+    gradient = Vec3(w[0], w[1], w[2]);
 }
 
 // ---- NanoVolume -------------------------------------------------------------------------------

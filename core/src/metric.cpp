@@ -1,5 +1,7 @@
 #include "riemesh/metric.h"
 
+#include "detail/nano_stencil.h"
+
 #include <nanovdb/util/SampleFromVoxels.h>
 
 #include <Eigen/Eigenvalues>
@@ -51,24 +53,27 @@ Mat3 metricFromEigen(const Mat3& basis, const Vec3& eigenvalues)
 struct NanoMetric::Impl {
     const nanovdb::Vec3fGrid* diag;
     const nanovdb::Vec3fGrid* off;
+    nanovdb::DefaultReadAccessor<nanovdb::Vec3f> diagAccessor, offAccessor;
 };
 
 NanoMetric::NanoMetric(const nanovdb::Vec3fGrid* diag, const nanovdb::Vec3fGrid* off, double maxEigenvalue)
-    : mImpl(new Impl{diag, off}), mMax(maxEigenvalue)
+    : mMax(maxEigenvalue)
 {
     if (!diag || !off) throw std::invalid_argument("NanoMetric: metric_diag and metric_off grids are required");
+    mImpl.reset(new Impl{diag, off, diag->getAccessor(), off->getAccessor()});
 }
 
 NanoMetric::~NanoMetric() = default;
 
 Mat3 NanoMetric::at(const Vec3& x) const
 {
-    // Both grids share one transform (written together by riemesh::vdb).
-    const auto ijk = mImpl->diag->worldToIndexF(nanovdb::Vec3f(float(x.x()), float(x.y()), float(x.z())));
-    auto diagAcc = mImpl->diag->getAccessor();
-    auto offAcc = mImpl->off->getAccessor();
-    const nanovdb::Vec3f d = nanovdb::createSampler<1>(diagAcc)(ijk);
-    const nanovdb::Vec3f o = nanovdb::createSampler<1>(offAcc)(ijk);
+    // Both grids share one transform and one topology (written together by riemesh::vdb).
+    const nanovdb::Vec3d ijk = mImpl->diag->worldToIndex(nanovdb::Vec3d(x.x(), x.y(), x.z()));
+    detail::Stencil<nanovdb::Vec3f> sd, so;
+    detail::fetchStencil(mImpl->diagAccessor, ijk, sd);
+    detail::fetchStencil(mImpl->offAccessor, ijk, so);
+    const nanovdb::Vec3f d = detail::trilinear(sd);
+    const nanovdb::Vec3f o = detail::trilinear(so);
     Mat3 g;
     g << d[0], o[0], o[1],
          o[0], d[1], o[2],

@@ -33,6 +33,12 @@ public:
     virtual double voxelSize() const = 0;
     /// World-space box of the data (for a sparse grid: its active voxels).
     virtual Box3 bounds() const = 0;
+    /// Value and gradient at once (sampled images share the voxel lookups).
+    virtual void sample(const Vec3& x, double& value, Vec3& gradient) const
+    {
+        value = this->value(x);
+        gradient = this->gradient(x);
+    }
 };
 
 /// An analytic image: I(x) = f(x), with an optional exact gradient.
@@ -73,18 +79,20 @@ private:
 };
 
 /// A NanoVDB float grid, trilinear in index space, mapped to world space by the grid's transform.
-/// The grid is not owned.
+/// The grid is not owned. Not thread-safe (it keeps a cached accessor): one object per thread.
 class NanoImage final : public ScalarImage {
 public:
     explicit NanoImage(const nanovdb::FloatGrid* grid);
     ~NanoImage() override;
     double value(const Vec3& x) const override;
     Vec3 gradient(const Vec3& x) const override;
+    void sample(const Vec3& x, double& value, Vec3& gradient) const override;
     double voxelSize() const override { return mVoxelSize; }
     Box3 bounds() const override { return mBounds; }
     const nanovdb::FloatGrid* grid() const { return mGrid; }
 private:
     const nanovdb::FloatGrid* mGrid;
+    mutable nanovdb::DefaultReadAccessor<float> mAccessor;
     double mVoxelSize;
     Box3 mBounds;
 };
