@@ -44,6 +44,7 @@ struct Scratch {
     std::vector<double> soa;     ///< 6 arrays of `count` in slot order: x y z nx ny nz
     std::vector<int> id;         ///< vertex index of each slot
     std::vector<std::uint32_t> near; ///< slots within the radius of the current one
+    std::vector<double> gather;  ///< one cell's half stencil: x, y, z, squared distance, slot
     std::vector<Candidate> candidates;
     detail::CellGrid grid;
     detail::BoundedPathSearch search;
@@ -167,15 +168,36 @@ std::vector<CollisionPair> findCollisions(const Mesh& mesh, const MetricField& m
         }
         S.candidates.push_back({u, w, dR});
     };
-    grid.forEachCellRange([&](std::uint32_t a0, std::uint32_t a1, std::uint32_t b0, std::uint32_t b1) {
+    // Per cell, the positions of its half stencil are gathered into short contiguous arrays
+    // (own cell first), so each vertex runs one loop over its candidates: squared distances
+    // (vectorisable), then the sheet tests only for the few within reach.
+    S.gather.resize(5 * count);
+    double* const gx = S.gather.data();
+    double* const gy = gx + count;
+    double* const gz = gy + count;
+    double* const gd = gz + count;
+    std::uint32_t* const gs = reinterpret_cast<std::uint32_t*>(gd + count);
+    grid.forEachCell([&](std::uint32_t a0, std::uint32_t a1, const std::uint32_t (*range)[2], int ranges) {
+        std::uint32_t m = 0;
+        for (int r = 0; r < ranges; ++r) {
+            for (std::uint32_t t = range[r][0]; t < range[r][1]; ++t, ++m) {
+                gx[m] = qx[t];
+                gy[m] = qy[t];
+                gz[m] = qz[t];
+                gs[m] = t;
+            }
+        }
         for (std::uint32_t s = a0; s < a1; ++s) {
+            const std::uint32_t first = s - a0 + 1;
             const double x = qx[s], y = qy[s], z = qz[s];
-            // Squared distances first (branch-free), the sheet tests only for the few within reach.
+            for (std::uint32_t j = first; j < m; ++j) {
+                const double dx = gx[j] - x, dy = gy[j] - y, dz = gz[j] - z;
+                gd[j] = dx * dx + dy * dy + dz * dz;
+            }
             std::uint32_t k = 0;
-            for (std::uint32_t t = (a0 == b0 ? s + 1 : b0); t < b1; ++t) {
-                const double dx = qx[t] - x, dy = qy[t] - y, dz = qz[t] - z;
-                near[k] = t;
-                k += (dx * dx + dy * dy + dz * dz <= r2);
+            for (std::uint32_t j = first; j < m; ++j) {
+                near[k] = gs[j];
+                k += gd[j] <= r2;
             }
             if (k == 0) continue;
             const double ux = mx[s], uy = my[s], uz = mz[s];

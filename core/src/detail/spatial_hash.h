@@ -29,23 +29,27 @@ public:
     /// The input position i (0 <= i < n) of slot s.
     std::uint32_t index(std::uint32_t s) const { return mOrder[s]; }
 
-    /// For every occupied cell with slots [a0, a1): calls f(a0, a1, a0, b1) once, where [a0, b1)
-    /// covers the cell and its +1 neighbour along the sweep axis (pair slot s with t in (s, b1)),
-    /// and f(a0, a1, b0, b1) for each forward row with occupied cells near it ([b0, b1): the
-    /// three cells of the row at sweep offsets -1, 0, +1; pair every s with every t). Every pair
-    /// of points closer than the cell size meets in exactly one call.
+    /// For every occupied cell with slots [a0, a1): calls f(a0, a1, range, count) with the slot
+    /// ranges range[0..count) (count <= 5, pairs [begin, end)) of its half stencil: range[0] =
+    /// [a0, b1) covers the cell and its +1 neighbour along the sweep axis (pair slot s with
+    /// t > s only), the others are the forward rows with occupied cells near it (the three cells
+    /// of the row at sweep offsets -1, 0, +1; pair every s with every t). Every pair of points
+    /// closer than the cell size meets in exactly one call.
     template <class F>
-    void forEachCellRange(F&& f) const
+    void forEachCell(F&& f) const
     {
         const std::size_t cells = mCellStart.size() - 1;
         if (cells == 0) return;
         const std::uint64_t* key = mCellKey.data(); // key[cells] is a sentinel above every key
         const std::uint32_t* start = mCellStart.data();
         std::size_t lo[4] = {0, 0, 0, 0}, hi[4] = {0, 0, 0, 0};
+        std::uint32_t range[5][2];
         for (std::size_t c = 0; c < cells; ++c) {
             const std::uint64_t k = key[c];
             const std::uint32_t a0 = start[c], a1 = start[c + 1];
-            f(a0, a1, a0, key[c + 1] == k + 1 ? start[c + 2] : a1);
+            range[0][0] = a0;
+            range[0][1] = key[c + 1] == k + 1 ? start[c + 2] : a1;
+            int count = 1;
             for (int r = 0; r < 4; ++r) {
                 const std::uint64_t first = k + mRowStep[r] - 1, last = first + 2;
                 std::size_t l = lo[r];
@@ -54,8 +58,11 @@ public:
                 std::size_t h = hi[r] > l ? hi[r] : l;
                 while (key[h] <= last) ++h;
                 hi[r] = h;
-                if (h > l) f(a0, a1, start[l], start[h]);
+                range[count][0] = start[l];
+                range[count][1] = start[h];
+                count += h > l;
             }
+            f(a0, a1, range, count);
         }
     }
 
