@@ -27,7 +27,7 @@ using Mat4f = Eigen::Matrix4f;
 struct ModelParameters {
     double iso = 0.5;            ///< image intensity of the surface
     bool objectBrighter = true;  ///< object where I > iso
-    double deltaVoxels = 2.0;    ///< shortest edge, metric length, voxels
+    double deltaVoxels = 3.0;    ///< shortest edge, metric length, voxels (as vdb2mesh)
     double zeta = 2.5;           ///< longest/shortest edge ratio
     double muScale = 1.0;        ///< metric eigenvalues become 1 + muScale * (mu - 1)
     bool riemannian = true;      ///< false: Euclidean metric (G = I)

@@ -137,11 +137,11 @@ void Evolution::updateConvergence()
     for (int i = n - 2 * w; i < n - w; ++i) previous += mHistory[i].meanKineticEnergy / scale;
     recent /= w;
     previous /= w;
-    // Still travelling somewhere: not converged, whatever the mean says. (Averaged over the window:
-    // noise and the odd split or collapse keep a few vertices jittering at rest.)
-    double travelling = 0;
-    for (int i = n - w; i < n; ++i) travelling += double(mHistory[i].moving) / double(std::max<std::size_t>(1, mHistory[i].vertices));
-    if (travelling / w > o.movingFraction) return;
+    // Still travelling somewhere (a front filling a cavity through a hole barely moves the mean of a
+    // mesh at rest elsewhere): not converged. Travelling is judged on the drift, which noise jitter
+    // does not build up.
+    for (int i = n - w; i < n; ++i)
+        if (double(mHistory[i].moving) > o.movingFraction * double(mHistory[i].vertices)) return;
     if (peak < o.energyThreshold) { mReason = StopReason::Converged; return; }
     // Stabilised: low energy (well below free-flight speed), no topology change and a nearly constant
     // vertex count over the last window, and energy no longer decreasing.

@@ -8,6 +8,9 @@ IntegrationStats integrate(Mesh& mesh, const std::vector<Vec3>& forces, const In
 {
     IntegrationStats stats;
     const auto velocity = velocityProperty(mesh);
+    OpenMesh::VPropHandleT<Drift> drift;
+    if (!mesh.get_property_handle(drift, kDriftProperty)) mesh.add_property(drift, kDriftProperty);
+    const double keep = options.driftDecay;
     const double dt = options.timeStep;
     const double invMass = 1.0 / options.mass;
     double energy = 0;
@@ -33,7 +36,11 @@ IntegrationStats integrate(Mesh& mesh, const std::vector<Vec3>& forces, const In
         energy += 0.5 * options.mass * u.squaredNorm();
         const double step = d.norm();
         stats.maxDisplacement = std::max(stats.maxDisplacement, step);
-        if (step > options.movingSpeed) ++stats.moving;
+        Drift& m = mesh.property(drift, v);
+        m.x = keep * m.x + (1 - keep) * d.x();
+        m.y = keep * m.y + (1 - keep) * d.y();
+        m.z = keep * m.z + (1 - keep) * d.z();
+        if (m.x * m.x + m.y * m.y + m.z * m.z > options.movingSpeed * options.movingSpeed) ++stats.moving;
         ++count;
     }
     stats.meanKineticEnergy = count ? energy / double(count) : 0.0;

@@ -28,7 +28,7 @@ namespace {
 namespace fs = std::filesystem;
 
 // Defaults (documented in --help).
-constexpr double kDelta = 2.0;      // voxels
+constexpr double kDelta = 3.0;      // voxels
 constexpr double kZeta = 2.5;
 constexpr double kMuMax = 9.0;
 constexpr double kSigma = 1.0;      // voxels

@@ -40,8 +40,8 @@ struct EvolutionOptions {
     double damping = 0.5;
     int maxIterations = 3000;
     int minIterations = 20;
-    /// Converged when no vertex is still travelling (faster than half the free-flight speed; at most
-    /// movingFraction of them) over convergenceWindow iterations and either the mean kinetic energy,
+    /// Converged when no vertex is still travelling (drifting faster than half the free-flight speed,
+    /// see Drift; at most movingFraction of them) over convergenceWindow iterations and either the mean kinetic energy,
     /// relative to delta^2, stays below energyThreshold, or it has stabilised (relative change over
     /// the window below relativeChange, no topology event, nearly constant vertex count).
     /// The mean alone is not enough: a few hundred vertices filling a cavity through a hole barely
@@ -49,7 +49,7 @@ struct EvolutionOptions {
     double energyThreshold = 1e-5;
     int convergenceWindow = 25;
     double relativeChange = 0.02;
-    double movingFraction = 0.005; ///< noise keeps a few vertices jittering at rest
+    double movingFraction = 0.002;
     std::size_t maxVertices = 4'000'000; ///< stop with VertexCap beyond this
     /// Called after every iteration; return false to interrupt.
     std::function<bool(const IterationStats&)> progress;

@@ -12,14 +12,23 @@ struct IntegrationOptions {
     double damping = 0.5;  ///< gamma
     double timeStep = 1.0; ///< dt (iterations)
     double vmax = 0.5;     ///< largest displacement per iteration (world units); clamps every step
-    double movingSpeed = 0; ///< displacements above this count as "moving" (world units per iteration)
+    double movingSpeed = 0; ///< drifts above this count as "moving" (world units per iteration)
+    double driftDecay = 0.9; ///< drift = driftDecay * drift + (1 - driftDecay) * displacement
 };
 
 struct IntegrationStats {
     double meanKineticEnergy = 0; ///< mean of m |v|^2 / 2 over vertices (world units^2 per iteration^2)
     double maxDisplacement = 0;   ///< largest displacement this step (world units), <= vmax
-    std::size_t moving = 0;       ///< vertices displaced by more than movingSpeed
+    std::size_t moving = 0;       ///< vertices whose drift exceeds movingSpeed: still travelling
 };
+
+/// Per-vertex drift: the displacement per iteration averaged over the last iterations (an
+/// exponential moving average). A travelling vertex drifts at its speed; a vertex jittering in
+/// noise at rest does not. Zero for new vertices (the type's constructor), unlike a plain Vec3d.
+struct Drift {
+    double x = 0, y = 0, z = 0;
+};
+inline constexpr const char* kDriftProperty = "riemesh:drift";
 
 /// Updates velocities (the mesh's velocity property) and positions from `forces` (indexed by
 /// vertex idx()), clamping each displacement to vmax.
