@@ -79,7 +79,7 @@ MetricGrids contourMetric(const std::function<double(const Vec3&)>& sdf, const B
     auto tensor = [&](const nanovdb::Coord& ijk) {
         const Vec3 x(ijk[0], ijk[1], ijk[2]);
         const double d = sdf(x);
-        const double w = std::exp(-d * d / 8.0);
+        const double w = std::exp(-d * d / 18.0); // Gaussian band, sigma 3 voxels
         if (w < 1e-3) return Mat3(Mat3::Identity());
         Vec3 g;
         for (int a = 0; a < 3; ++a) {
@@ -165,7 +165,7 @@ void fullRuns(bool quick)
                 o.maxIterations = 3000;
                 EuclideanMetric euclidean;
                 MetricGrids contour;
-                if (riemannian) contour = contourMetric(s.sdf, s.bounds, 9.0);
+                if (riemannian) contour = contourMetric(s.sdf, s.bounds, 4.0);
                 const MetricField& metric = riemannian ? static_cast<const MetricField&>(*contour.metric) : euclidean;
                 Mesh mesh = makeInitialBox(image, 2.0 * o.delta);
                 const auto stats = evolve(mesh, image, metric, o);
