@@ -4,6 +4,8 @@
 #include "riemesh/mesh_io.h"
 #include "riemesh/vdb/volume.h"
 
+#include "cli.h"
+
 #include <atomic>
 #include <cctype>
 #include <cerrno>
@@ -37,9 +39,8 @@ constexpr double kSmooth = 1.0;     // voxels
 constexpr int kMaxIterations = 3000;
 
 /// Bad input or parameters: exit 1.
-struct BadInput : std::runtime_error {
-    using std::runtime_error::runtime_error;
-};
+using riemesh::apps::BadInput;
+using riemesh::apps::parseNumber;
 
 volatile std::sig_atomic_t gInterrupted = 0;
 extern "C" void onSigint(int)
@@ -107,16 +108,6 @@ void usage(std::FILE* out)
         "run leaves no partial file and an existing file untouched.\n"
         "Exit codes: 0 success, 1 bad input or parameters, 2 internal failure, 130 interrupted (Ctrl-C).\n",
         kSmooth, kDelta, kZeta, kMuMax, kSigma, kRho, kMaxIterations);
-}
-
-double parseNumber(const std::string& flag, const std::string& text)
-{
-    char* end = nullptr;
-    errno = 0;
-    const double v = std::strtod(text.c_str(), &end);
-    if (text.empty() || *end != '\0' || errno == ERANGE || !std::isfinite(v))
-        throw BadInput(flag + ": '" + text + "' is not a number");
-    return v;
 }
 
 int parseCount(const std::string& flag, const std::string& text, int lo)

@@ -1,6 +1,8 @@
 // vdbphantom SHAPE OUTPUT.vdb [--size N] [--noise S] [--seed K]: synthetic fog volumes with a known surface.
 #include "riemesh/vdb/volume.h"
 
+#include "cli.h"
+
 #include <cerrno>
 #include <cmath>
 #include <cstdint>
@@ -13,9 +15,8 @@
 
 namespace {
 
-struct BadInput : std::runtime_error {
-    using std::runtime_error::runtime_error;
-};
+using riemesh::apps::BadInput;
+using riemesh::apps::parseNumber;
 
 void usage(std::FILE* out)
 {
@@ -38,16 +39,6 @@ void usage(std::FILE* out)
         "\n"
         "Exit codes: 0 success, 1 bad input or parameters, 2 internal failure.\n",
         shapes.c_str());
-}
-
-double parseNumber(const std::string& flag, const std::string& text)
-{
-    char* end = nullptr;
-    errno = 0;
-    const double v = std::strtod(text.c_str(), &end);
-    if (text.empty() || *end != '\0' || errno == ERANGE || !std::isfinite(v))
-        throw BadInput(flag + ": '" + text + "' is not a number");
-    return v;
 }
 
 } // namespace
