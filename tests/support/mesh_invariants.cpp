@@ -41,8 +41,7 @@ InvariantReport checkInvariants(const Mesh& mesh, const InvariantOptions& option
         std::size_t fan = 0, outgoing = 0;
         for (auto f : mesh.vf_range(v)) { (void)f; ++fan; }
         for (auto h : mesh.voh_range(v)) { (void)h; ++outgoing; }
-        // Count halfedges ending/starting at v by scanning faces incident through any route is
-        // expensive; instead count the faces that reference v from the face side.
+        // On a closed manifold every outgoing halfedge has a face: the fan has one face per spoke.
         if (fan != outgoing) problem("vertex " + std::to_string(v.idx()) + " fan size differs from valence");
         if (outgoing < 3) problem("vertex " + std::to_string(v.idx()) + " has valence " + std::to_string(outgoing));
         if (!std::isfinite(mesh.point(v)[0]) || !std::isfinite(mesh.point(v)[1]) || !std::isfinite(mesh.point(v)[2]))
