@@ -453,7 +453,8 @@ int main(int argc, char** argv)
                 j << (i ? ",\n    " : "\n    ") << "{\"iteration\": " << s.iteration << ", \"vertices\": " << s.vertices
                   << ", \"mean_kinetic_energy\": " << s.meanKineticEnergy << ", \"splits\": " << s.splits
                   << ", \"collapses\": " << s.collapses << ", \"flips\": " << s.flips << ", \"merges\": " << s.merges
-                  << ", \"cuts\": " << s.cuts << ", \"ms\": " << s.milliseconds << "}";
+                  << ", \"cuts\": " << s.cuts << ", \"removed_components\": " << s.removedComponents
+                  << ", \"travelling\": " << s.moving << ", \"ms\": " << s.milliseconds << "}";
             }
             j << "\n  ],\n  \"summary\": {\"vertices\": " << topo.vertices << ", \"faces\": " << topo.faces
               << ", \"components\": " << topo.components << ", \"genus\": " << topo.genus << ", \"euler\": " << topo.euler
