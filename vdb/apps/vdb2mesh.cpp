@@ -273,6 +273,8 @@ int main(int argc, char** argv)
 {
     using namespace riemesh;
     const auto start = std::chrono::steady_clock::now();
+    // From the start, so that Ctrl-C while the input is read also ends cleanly (exit 130, a message).
+    std::signal(SIGINT, onSigint);
 
     // ---- Phase 1: everything that can be wrong with the input, before any long work (exit 1). ----
     Args args;
@@ -355,13 +357,13 @@ int main(int argc, char** argv)
     }
 
     // ---- Phase 2: the work (exit 2 on failure, 130 when interrupted). ----
-    std::signal(SIGINT, onSigint);
     const bool tty = !args.quiet && ::isatty(STDERR_FILENO);
     const auto interrupted = [&]() {
         if (tty) std::fprintf(stderr, "\n");
         std::fprintf(stderr, "vdb2mesh: interrupted, no output written\n");
         return 130;
     };
+    if (gInterrupted) return interrupted();
     try {
         auto threadLimit = vdb::limitThreads(args.threads);
         const auto& info = volume.info();
