@@ -15,8 +15,7 @@ double metricLength(const MetricField& metric, const Vec3& u, const Vec3& v)
 {
     const Vec3 d = v - u;
     if (metric.isEuclidean()) return d.norm();
-    const Mat3 g = metric.at(0.5 * (u + v));
-    return std::sqrt(std::max(0.0, d.dot(g * d)));
+    return metricLength(metric.at(0.5 * (u + v)), d);
 }
 
 double metricLength(const MetricField& metric, const Mesh& mesh, EdgeHandle e)
@@ -25,8 +24,7 @@ double metricLength(const MetricField& metric, const Mesh& mesh, EdgeHandle e)
     const Vec3 u = position(mesh, mesh.from_vertex_handle(h)), v = position(mesh, mesh.to_vertex_handle(h));
     const Vec3 d = v - u;
     if (metric.isEuclidean()) return d.norm();
-    const Mat3 g = 0.5 * (metric.at(u) + metric.at(v));
-    return std::sqrt(std::max(0.0, d.dot(g * d)));
+    return metricLength(Mat3(0.5 * (metric.at(u) + metric.at(v))), d);
 }
 
 ConstantMetric::ConstantMetric(const Mat3& g) : mG(g)

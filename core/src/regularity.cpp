@@ -103,8 +103,7 @@ public:
     {
         const Vec3 d = position(mMesh, b) - position(mMesh, a);
         if (mMetric.isEuclidean()) return d.norm();
-        const Mat3 g = 0.5 * (vertexMetric(a) + vertexMetric(b));
-        return std::sqrt(std::max(0.0, d.dot(g * d)));
+        return metricLength(Mat3(0.5 * (vertexMetric(a) + vertexMetric(b))), d);
     }
 
     /// Measures every edge once, queues the long and the short ones and counts the valences.

@@ -8,6 +8,8 @@
 
 #include "riemesh/mesh.h"
 
+#include <algorithm>
+#include <cmath>
 #include <functional>
 #include <memory>
 
@@ -25,6 +27,9 @@ public:
     /// True when G = I everywhere (callers may take the Euclidean fast path; results must not change).
     virtual bool isEuclidean() const { return false; }
 };
+
+/// Length of the displacement d (world units) under the constant tensor g: sqrt(d^T g d).
+inline double metricLength(const Mat3& g, const Vec3& d) { return std::sqrt(std::max(0.0, d.dot(g * d))); }
 
 /// Metric length of the segment u-v (world-space points), with G taken at the midpoint.
 double metricLength(const MetricField& metric, const Vec3& u, const Vec3& v);
