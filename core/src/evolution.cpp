@@ -123,7 +123,8 @@ void Evolution::updateConvergence()
 {
     const EvolutionOptions& o = mOptions;
     const int n = int(mHistory.size());
-    if (mMesh.n_vertices() > o.maxVertices) { mReason = StopReason::VertexCap; return; }
+    // The live count (n_vertices() also counts deleted vertices not yet compacted away).
+    if (n > 0 && mHistory[n - 1].vertices > o.maxVertices) { mReason = StopReason::VertexCap; return; }
     if (n >= o.maxIterations) { mReason = StopReason::IterationCap; return; }
     const int w = o.convergenceWindow;
     if (n < std::max(o.minIterations, 2 * w)) return;

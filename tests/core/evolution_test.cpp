@@ -225,3 +225,18 @@ TEST_CASE("evolution: nonsense options are refused")
     o.zeta = 0.5;
     CHECK_THROWS_AS(Evolution(mesh, image, metric, o), std::invalid_argument);
 }
+
+TEST_CASE("evolution: a mesh growing past maxVertices stops with vertex-cap")
+{
+    const auto image = fogImage([](const Vec3& x) { return ballSdf(x, Vec3::Zero(), 8); },
+                                Box3(Vec3::Constant(-12), Vec3::Constant(12)));
+    Mesh mesh = makeInitialBox(image, 2.0);
+    EuclideanMetric metric;
+    EvolutionOptions o = baseOptions(0.5); // refines the box well past the cap
+    o.maxVertices = 3000;
+    const auto stats = evolve(mesh, image, metric, o);
+    CHECK(std::string(toString(stats.reason)) == "vertex-cap");
+    CHECK(stats.iterations.back().vertices > 3000u);
+    CHECK(stats.iterations.size() < 100u);
+    CHECK_MESH_OK(mesh);
+}
