@@ -246,3 +246,27 @@ TEST_CASE("vdb2mesh: SIGINT interrupts the run: exit 130, no output file, an exi
     CHECK(slurp(f.path("p.ply")) == "precious");
     CHECK(f.fileCount() == before);
 }
+
+TEST_CASE("vdb2mesh: the Colin27 head MRI at --iso 40 alone is one closed skin of genus <= 2 under 40k vertices")
+{
+    // Debian mricron-data (installed by scripts/setup). The image cuts the head at the nose: the
+    // default closed borders keep the surface out of the cut slice's cavities.
+    const std::string head = "/usr/share/mricron/templates/ch2.nii.gz";
+    REQUIRE_MESSAGE(fs::exists(head), "install mricron-data (scripts/setup)");
+    Fixture f;
+    const Run r = f.run(RIEMESH_VDB2MESH_EXE, head + " " + f.path("head.ply") + " --iso 40 --stats " + f.path("head.json"));
+    INFO(r.err);
+    INFO(r.out);
+    REQUIRE(r.code == 0);
+    CHECK(r.out.find("1 component, genus ") != std::string::npos);
+    CHECK(r.out.find("(converged)") != std::string::npos);
+    const std::string json = slurp(f.path("head.json"));
+    const auto number = [&](const std::string& key) {
+        const auto at = json.rfind("\"" + key + "\": ");
+        REQUIRE(at != std::string::npos);
+        return std::stod(json.substr(at + key.size() + 4));
+    };
+    CHECK(number("genus") <= 2);
+    CHECK(number("vertices") <= 40000);
+    CHECK(number("border_voxels_added") > 0);
+}

@@ -1,5 +1,6 @@
 // Reading and writing: NIfTI (Colin27 and a file written here with nifticlib), .vdb and .nvdb round
 // trips, refusals with messages that name the problem, mesh level sets and accuracy against an sdf.
+#include "riemesh/evolution.h"
 #include "riemesh/primitives.h"
 #include "riemesh/vdb/io.h"
 #include "riemesh/vdb/level_set.h"
@@ -287,4 +288,87 @@ TEST_CASE("accuracy: a mesh of the phantom's true surface is within a fraction o
     const SurfaceError e2 = surfaceError(smaller, *p.sdf);
     CHECK(e2.meanVertexDistance == doctest::Approx(1.0).epsilon(0.05));
     CHECK(e2.hausdorff == doctest::Approx(1.0).epsilon(0.15));
+}
+
+namespace {
+
+// A half ball standing on the image's z = 0 face, cut by it, with a U-shaped tunnel that opens
+// through the cut face at two holes: the isosurface of the image as cut goes through the tunnel
+// (genus 1); the object as a user means it (continued beyond the field of view) is a solid half
+// ball with a hidden void.
+openvdb::FloatGrid::Ptr cutHalfBallWithTunnel()
+{
+    initialize();
+    auto grid = openvdb::FloatGrid::create(0.0f);
+    grid->setGridClass(openvdb::GRID_FOG_VOLUME);
+    grid->setName("density");
+    auto acc = grid->getAccessor();
+    const auto tube = [](double x, double y, double z) {
+        const double r = 3.0;
+        const double leg = std::min(std::hypot(x - 12, y - 20), std::hypot(x - 28, y - 20));
+        const double legs = z <= 10 ? leg : std::hypot(leg, z - 10);
+        const double across = (x >= 12 && x <= 28) ? std::hypot(y - 20, z - 10) : 1e9;
+        return std::min(legs, across) - r; // > 0 outside the tube
+    };
+    for (int k = 0; k < 40; ++k)
+        for (int j = 0; j < 40; ++j)
+            for (int i = 0; i < 40; ++i) {
+                const double ball = 18.0 - std::hypot(i - 20.0, j - 20.0, double(k)); // > 0 inside
+                const double sd = std::min(ball, tube(i, j, k));                    // > 0 in the object
+                acc.setValue(Coord(i, j, k), float(std::clamp(0.5 + sd, 0.0, 1.0)));
+            }
+    return grid;
+}
+
+} // namespace
+
+TEST_CASE("closeBorders: the footprint of an object cut by the image box, holes filled, is copied two voxels out")
+{
+    TempDir dir;
+    const std::string path = dir / "cut.vdb";
+    writeVdb(path, {cutHalfBallWithTunnel()});
+    Volume volume = Volume::read(path);
+    const std::uint64_t added = volume.closeBorders(0.5, true);
+    // The z = 0 disc of radius 18 (~pi 18^2 = 1018 voxels) including both tunnel holes; nothing
+    // else touches the box.
+    CHECK(added > 2 * 950);
+    CHECK(added < 2 * 1100);
+    const riemesh::NanoVolume nano = volume.nano();
+    riemesh::NanoImage image(nano.imageGrid());
+    double v;
+    riemesh::Vec3 g;
+    image.sample(riemesh::Vec3(20, 20, -1), v, g); // under the solid centre
+    CHECK(v > 0.5);
+    image.sample(riemesh::Vec3(12, 20, -1), v, g); // under a tunnel hole: filled
+    CHECK(v > 0.5);
+    image.sample(riemesh::Vec3(2, 2, -1), v, g); // outside the footprint
+    CHECK(v < 0.5);
+    image.sample(riemesh::Vec3(20, 20, 41), v, g); // the top face has no object: nothing added
+    CHECK(v < 0.5);
+}
+
+TEST_CASE("closeBorders: a deflating box keeps the cut object's topology (genus 0) instead of tunnelling in")
+{
+    TempDir dir;
+    const std::string path = dir / "cut.vdb";
+    writeVdb(path, {cutHalfBallWithTunnel()});
+    for (const bool close : {false, true}) {
+        CAPTURE(close);
+        Volume volume = Volume::read(path);
+        if (close) volume.closeBorders(0.5, true);
+        const riemesh::NanoVolume nano = volume.nano();
+        riemesh::NanoImage image(nano.imageGrid());
+        riemesh::EuclideanMetric metric;
+        riemesh::EvolutionOptions opt;
+        opt.delta = 1.2;
+        opt.zeta = 2.5;
+        opt.maxIterations = 1500;
+        riemesh::Mesh mesh = riemesh::makeInitialBox(image, 0.5 * (1 + opt.zeta) * opt.delta);
+        const auto stats = riemesh::evolve(mesh, image, metric, opt);
+        CHECK(std::string(riemesh::toString(stats.reason)) == "converged");
+        const auto topo = riemesh::topologyOf(mesh);
+        CHECK(topo.components == 1);
+        // Open borders: the tunnel's two holes on the cut face make a handle.
+        CHECK(topo.genus == (close ? 0 : 1));
+    }
 }

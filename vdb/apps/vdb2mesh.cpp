@@ -60,6 +60,7 @@ struct Args {
     std::string exportNvdb, writeMetric, stats, reference;
     int threads = 0;
     bool quiet = false;
+    bool openBorders = false;
 };
 
 void usage(std::FILE* out)
@@ -81,6 +82,9 @@ void usage(std::FILE* out)
         "  --iso V              isovalue, image intensity (default: 0.5 for fog volumes, 0 for level\n"
         "                       sets; required for other images, e.g. --iso 40 for a T1 head MRI)\n"
         "  --smooth S           Gaussian smoothing of the image the model fits, voxels (default %g; 0 = off)\n"
+        "  --open-borders       where the object touches the image box (a head cut at the neck), let the\n"
+        "                       surface follow the cut slice into the object; by default the object is\n"
+        "                       closed just beyond the border, its footprint's enclosed holes filled\n"
         "Model\n"
         "  --metric M           riemannian | euclidean (default riemannian)\n"
         "  --delta D            shortest edge, metric length, voxels (default %g)\n"
@@ -164,6 +168,7 @@ Args parseArgs(int argc, char** argv)
         else if (f == "--reference") a.reference = value();
         else if (f == "--threads") a.threads = parseCount(f, value(), 1);
         else if (f == "-q" || f == "--quiet") a.quiet = true;
+        else if (f == "--open-borders") a.openBorders = true;
         else if (f.size() > 1 && f[0] == '-') throw BadInput("unknown option '" + f + "' (see --help)");
         else positional.push_back(f);
     }
@@ -372,6 +377,7 @@ int main(int argc, char** argv)
         const auto metricStart = std::chrono::steady_clock::now();
         if (tty) std::fprintf(stderr, "vdb2mesh: %s '%s' %dx%dx%d, metric...", info.format.c_str(),
                               info.gridName.c_str(), info.dims[0], info.dims[1], info.dims[2]);
+        const std::uint64_t borderVoxels = args.openBorders ? 0 : volume.closeBorders(iso, objectBrighter);
         vdb::VolumeMetricStats metricStats;
         if (args.riemannian) {
             // The tensor is computed on the image as read (its own sigma); the forces see it smoothed.
@@ -444,7 +450,8 @@ int main(int argc, char** argv)
               << "\", \"iso\": " << iso << ", \"delta_voxels\": " << args.delta << ", \"zeta\": " << args.zeta
               << ", \"mu_max\": " << args.muMax << ", \"sigma_voxels\": " << args.sigma << ", \"rho_voxels\": "
               << args.rho << ", \"smooth_voxels\": " << args.smooth << ", \"max_iterations\": " << args.maxIterations
-              << ", \"init\": " << jsonString(args.init) << "},\n";
+              << ", \"init\": " << jsonString(args.init) << ", \"open_borders\": " << (args.openBorders ? "true" : "false")
+              << ", \"border_voxels_added\": " << borderVoxels << "},\n";
             if (args.riemannian)
                 j << "  \"metric\": {\"active_voxels\": " << metricStats.activeVoxels << ", \"total_voxels\": "
                   << metricStats.totalVoxels << ", \"xi_ref\": " << metricStats.xiRef << ", \"threshold\": "

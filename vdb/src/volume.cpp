@@ -138,6 +138,100 @@ Volume Volume::read(const std::string& path, const std::string& gridName)
     return v;
 }
 
+std::uint64_t Volume::closeBorders(double iso, bool objectBrighter)
+{
+    auto& grid = *mImpl->image;
+    const openvdb::CoordBBox box = grid.evalActiveVoxelBoundingBox();
+    if (box.empty()) return 0;
+    const auto inside = [&](float v) { return objectBrighter ? v > iso : v < iso; };
+    std::uint64_t added = 0;
+    // All six slices are read before any padding is written, so the pads do not see each other.
+    struct Pad {
+        openvdb::Coord ijk;
+        float value;
+    };
+    std::vector<Pad> pads;
+    for (int axis = 0; axis < 3; ++axis) {
+        const int ua = (axis + 1) % 3, va = (axis + 2) % 3;
+        const int u0 = box.min()[ua], v0 = box.min()[va];
+        const int nu = box.dim()[ua], nv = box.dim()[va];
+        for (int side = 0; side < 2; ++side) {
+            const int c = side ? box.max()[axis] : box.min()[axis];
+            const auto at = [&](int u, int v) {
+                openvdb::Coord ijk;
+                ijk[axis] = c;
+                ijk[ua] = u0 + u;
+                ijk[va] = v0 + v;
+                return ijk;
+            };
+            auto acc = grid.getConstAccessor();
+            std::vector<float> value(std::size_t(nu) * nv);
+            std::vector<char> in(value.size());
+            double insideSum = 0;
+            std::size_t insideCount = 0;
+            for (int v = 0; v < nv; ++v)
+                for (int u = 0; u < nu; ++u) {
+                    const std::size_t k = std::size_t(v) * nu + u;
+                    value[k] = acc.getValue(at(u, v));
+                    in[k] = inside(value[k]);
+                    if (in[k]) {
+                        insideSum += value[k];
+                        ++insideCount;
+                    }
+                }
+            if (insideCount == 0) continue;
+            // Outside of the footprint: what a 4-connected flood from the slice's rim reaches
+            // through non-object pixels; everything else (object and enclosed holes) is footprint.
+            std::vector<char> reached(value.size(), 0);
+            std::vector<std::size_t> stack;
+            const auto seed = [&](int u, int v) {
+                const std::size_t k = std::size_t(v) * nu + u;
+                if (!in[k] && !reached[k]) {
+                    reached[k] = 1;
+                    stack.push_back(k);
+                }
+            };
+            for (int u = 0; u < nu; ++u) {
+                seed(u, 0);
+                seed(u, nv - 1);
+            }
+            for (int v = 0; v < nv; ++v) {
+                seed(0, v);
+                seed(nu - 1, v);
+            }
+            while (!stack.empty()) {
+                const std::size_t k = stack.back();
+                stack.pop_back();
+                const int u = int(k % nu), v = int(k / nu);
+                if (u > 0) seed(u - 1, v);
+                if (u + 1 < nu) seed(u + 1, v);
+                if (v > 0) seed(u, v - 1);
+                if (v + 1 < nv) seed(u, v + 1);
+            }
+            const float fill = float(insideSum / double(insideCount));
+            for (int v = 0; v < nv; ++v)
+                for (int u = 0; u < nu; ++u) {
+                    const std::size_t k = std::size_t(v) * nu + u;
+                    if (reached[k]) continue;
+                    // Two layers: the initial box (inset by one voxel from the image box) then
+                    // starts on the cap, not on the cut slice where it would fall into its holes.
+                    for (int layer = 1; layer <= 2; ++layer) {
+                        openvdb::Coord ijk = at(u, v);
+                        ijk[axis] += side ? layer : -layer;
+                        pads.push_back({ijk, in[k] ? value[k] : fill});
+                    }
+                }
+        }
+    }
+    auto acc = grid.getAccessor();
+    for (const Pad& p : pads) {
+        if (acc.isValueOn(p.ijk)) continue; // an edge voxel two faces both pad: keep the first
+        acc.setValueOn(p.ijk, p.value);
+        ++added;
+    }
+    return added;
+}
+
 void Volume::smooth(double sigmaVoxels)
 {
     if (sigmaVoxels <= 0) return;

@@ -53,6 +53,14 @@ public:
 
     const ImageInfo& info() const;
 
+    /// Closes the object where the image cuts it (a head cut at the neck, an organ at the edge of the
+    /// field of view): on each face of the image box, the object's footprint in the border slice
+    /// (voxels on the object's side of `iso`, with the holes the slice encloses filled) is copied two
+    /// voxels outward, so the isosurface closes just beyond the border instead of opening into the
+    /// object through every cavity the cut slice shows. Returns the voxels added (0 when nothing
+    /// touches the border). Call before computeMetric so the metric sees the closing cap too.
+    std::uint64_t closeBorders(double iso, bool objectBrighter);
+
     /// Replaces the image by its Gaussian smoothing (sigma in voxels; 0 does nothing).
     void smooth(double sigmaVoxels);
 
