@@ -60,7 +60,7 @@ IterationStats Evolution::step()
     const EvolutionOptions& o = mOptions;
     const double vmax = o.vmaxFraction * o.delta;
 
-    computeForces(mMesh, mImage, o.forces, o.delta, mForces);
+    computeForces(mMesh, mImage, o.forces, o.delta, mForces, &mMetric);
     IntegrationOptions io;
     io.mass = o.mass;
     io.damping = o.damping;

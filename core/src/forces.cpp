@@ -12,17 +12,23 @@ double clampUnit(double s) { return std::max(-1.0, std::min(1.0, s)); }
 } // namespace
 
 void computeForces(const Mesh& mesh, const ScalarImage& image, const ForceOptions& options, double delta,
-                   std::vector<Vec3>& forces)
+                   std::vector<Vec3>& forces, const MetricField* metric)
 {
     const std::size_t n = mesh.n_vertices();
     forces.assign(n, Vec3::Zero());
 
     // Area-weighted vertex normals and umbrella vectors in one pass over faces / halfedges.
     static thread_local std::vector<Vec3> normal, neighbourSum;
-    static thread_local std::vector<int> valence;
+    static thread_local std::vector<double> weightSum;
+    static thread_local std::vector<Mat3> tensor;
     normal.assign(n, Vec3::Zero());
     neighbourSum.assign(n, Vec3::Zero());
-    valence.assign(n, 0);
+    weightSum.assign(n, 0.0);
+    const bool riemannian = metric && !metric->isEuclidean();
+    if (riemannian) {
+        tensor.resize(n);
+        for (auto v : mesh.vertices()) tensor[v.idx()] = metric->at(position(mesh, v));
+    }
     for (auto f : mesh.faces()) {
         auto h0 = mesh.halfedge_handle(f);
         auto h1 = mesh.next_halfedge_handle(h0);
@@ -34,11 +40,21 @@ void computeForces(const Mesh& mesh, const ScalarImage& image, const ForceOption
         normal[b.idx()] += fn;
         normal[c.idx()] += fn;
     }
-    for (auto h : mesh.halfedges()) {
-        // each halfedge contributes its tip to its origin's umbrella
-        const VertexHandle from = mesh.from_vertex_handle(h);
-        neighbourSum[from.idx()] += position(mesh, mesh.to_vertex_handle(h));
-        ++valence[from.idx()];
+    for (auto e : mesh.edges()) {
+        // each edge contributes each end to the other's umbrella, weighted by its metric stretch
+        const auto h = mesh.halfedge_handle(e, 0);
+        const int a = mesh.from_vertex_handle(h).idx(), b = mesh.to_vertex_handle(h).idx();
+        const Vec3 pa = position(mesh, mesh.from_vertex_handle(h)), pb = position(mesh, mesh.to_vertex_handle(h));
+        double w = 1.0;
+        if (riemannian) {
+            const Vec3 d = pb - pa;
+            const double euclid = d.norm();
+            if (euclid > 0) w = metricLength(0.5 * (tensor[a] + tensor[b]), d) / euclid;
+        }
+        neighbourSum[a] += w * pb;
+        neighbourSum[b] += w * pa;
+        weightSum[a] += w;
+        weightSum[b] += w;
     }
 
     const double sign = options.objectBrighter ? 1.0 : -1.0;
@@ -47,7 +63,7 @@ void computeForces(const Mesh& mesh, const ScalarImage& image, const ForceOption
         const int i = v.idx();
         const Vec3 x = position(mesh, v);
         double len = normal[i].norm();
-        if (!(len > 0) || valence[i] == 0) continue;
+        if (!(len > 0) || !(weightSum[i] > 0)) continue;
         const Vec3 nrm = normal[i] / len;
 
         // External: inflation/deflation toward I = iso along the normal. The signed distance to the
@@ -69,7 +85,7 @@ void computeForces(const Mesh& mesh, const ScalarImage& image, const ForceOption
         const double freedom = limit > 0 ? std::abs(push) / limit : 0.0;
 
         // Internal: umbrella operator, split into tangential (sampling) and normal (curvature) parts.
-        const Vec3 umbrella = neighbourSum[i] / double(valence[i]) - x;
+        const Vec3 umbrella = neighbourSum[i] / weightSum[i] - x;
         const double un = umbrella.dot(nrm);
         // Free-flight smoothing only where the curvature points along the motion: the parts of a
         // moving front that would fold into a swallowtail (creases of a deflating box, concave parts of

@@ -240,3 +240,30 @@ TEST_CASE("evolution: a mesh growing past maxVertices stops with vertex-cap")
     CHECK(stats.iterations.size() < 100u);
     CHECK_MESH_OK(mesh);
 }
+
+TEST_CASE("evolution: a metric that stretches lengths 1.5x on one half densifies the sampling there > 2.6x")
+{
+    // A stretch of 1.5 is inside the [delta, zeta*delta] window (zeta 2.5): regularity alone lets
+    // both halves settle anywhere in it (measured: density ratio 2.1 with a Euclidean umbrella). The
+    // Riemannian umbrella weights each neighbour by its edge's metric stretch, pulling vertices into
+    // the stretched half (measured: 3.1).
+    const double radius = 10.0;
+    const auto image = fogImage([&](const Vec3& x) { return ballSdf(x, Vec3::Zero(), radius); },
+                                Box3(Vec3::Constant(-14), Vec3::Constant(14)));
+    const FunctionMetric metric(
+        [](const Vec3& x) { return x.x() > 0 ? Mat3(2.25 * Mat3::Identity()) : Mat3(Mat3::Identity()); }, 2.25);
+    Mesh mesh = makeInitialBox(image, 2.0);
+    const auto stats = runChecked(mesh, image, metric, baseOptions(1.2));
+    CHECK(std::string(toString(stats.reason)) == "converged");
+    int positive = 0, negative = 0; // away from the jump at x = 0
+    for (auto v : mesh.vertices()) {
+        const double x = mesh.point(v)[0];
+        if (x > 2.0) ++positive;
+        else if (x < -2.0) ++negative;
+    }
+    REQUIRE(negative > 0);
+    const double ratio = double(positive) / negative;
+    MESSAGE("vertices x > 2: " << positive << ", x < -2: " << negative << ", ratio " << ratio);
+    CHECK(ratio > 2.6);
+    CHECK(ratio < 4.0);
+}

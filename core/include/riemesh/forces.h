@@ -8,6 +8,7 @@
 
 #include "riemesh/image.h"
 #include "riemesh/mesh.h"
+#include "riemesh/metric.h"
 
 #include <vector>
 
@@ -29,7 +30,14 @@ struct ForceOptions {
 
 /// Per-vertex total force (F_int + F_ext), indexed by vertex idx(); `delta` (world units) sets the
 /// force scale. Deleted vertices get zero.
+///
+/// With a (non-Euclidean) `metric`, the umbrella is the Riemannian one: each neighbour is weighted by
+/// the metric stretch of its edge (metric length / Euclidean length, G the mean of the endpoint
+/// tensors, as in regularity). Its rest state has equal *metric* edge lengths around every vertex, so
+/// the sampling densifies where the metric stretches (contour edges and corners) and thins out on flat
+/// parts, instead of merely staying inside [delta, zeta*delta] (a window wide enough for a uniform
+/// Euclidean mesh to satisfy it almost everywhere).
 void computeForces(const Mesh& mesh, const ScalarImage& image, const ForceOptions& options, double delta,
-                   std::vector<Vec3>& forces);
+                   std::vector<Vec3>& forces, const MetricField* metric = nullptr);
 
 } // namespace riemesh
