@@ -145,6 +145,7 @@ void App::installVolume(std::unique_ptr<NanoVolume> volume, std::unique_ptr<Scal
     } else {
         d.iso = 0.5 * (mImageMin + mImageMax);
     }
+    if (mVolume && mVolume->hasIso()) d.iso = mVolume->iso(); // vdb2mesh --iso V --export-nvdb
     d.riemannian = mVolumeMetric != nullptr;
     mDefaults = d;
     mParams = d;

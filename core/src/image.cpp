@@ -142,7 +142,7 @@ static double gershgorinBound(const nanovdb::Vec3fGrid* diag, const nanovdb::Vec
 
 void NanoVolume::index()
 {
-    mImage = mDiag = mOff = -1;
+    mImage = mDiag = mOff = mIsoGrid = -1;
     for (int i = 0; i < int(mHandles.size()); ++i) {
         const auto* meta = mHandles[i].gridMetaData();
         if (!meta) continue;
@@ -155,6 +155,12 @@ void NanoVolume::index()
             if (!mHandles[i].grid<nanovdb::Vec3f>())
                 throw std::runtime_error("nvdb: grid 'metric_off' is not a Vec3f grid");
             mOff = i;
+        } else if (name == kIsoGrid) {
+            const auto* grid = mHandles[i].grid<float>();
+            if (!grid) throw std::runtime_error(std::string("nvdb: grid '") + kIsoGrid + "' is not a float grid");
+            if (!std::isfinite(grid->tree().getValue(nanovdb::Coord(0))))
+                throw std::runtime_error(std::string("nvdb: grid '") + kIsoGrid + "' holds no finite isovalue");
+            mIsoGrid = i;
         } else if (mImage < 0 && mHandles[i].grid<float>()) {
             mImage = i;
         }
@@ -190,6 +196,12 @@ NanoVolume NanoVolume::fromBytes(const std::uint8_t* data, std::size_t size)
     if (volume.mHandles.empty()) throw std::runtime_error("NanoVDB data holds no grid");
     volume.index();
     return volume;
+}
+
+double NanoVolume::iso() const
+{
+    if (mIsoGrid < 0) throw std::logic_error("NanoVolume::iso: the volume stores no isovalue");
+    return mHandles[mIsoGrid].grid<float>()->tree().getValue(nanovdb::Coord(0));
 }
 
 const nanovdb::FloatGrid* NanoVolume::imageGrid() const

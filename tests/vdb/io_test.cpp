@@ -372,3 +372,52 @@ TEST_CASE("closeBorders: a deflating box keeps the cut object's topology (genus 
         CHECK(topo.genus == (close ? 0 : 1));
     }
 }
+
+TEST_CASE("nvdb: the isovalue given to the export travels with the file; files without one have none")
+{
+    TempDir dir;
+    PhantomOptions o;
+    o.size = 16;
+    const Phantom p = makePhantom(PhantomShape::Ball, o);
+    writeNvdb(dir / "with.nvdb", *p.density, nullptr, nullptr, 0.25);
+    writeNvdb(dir / "without.nvdb", *p.density);
+    const riemesh::NanoVolume with = riemesh::NanoVolume::read(dir / "with.nvdb");
+    REQUIRE(with.hasIso());
+    CHECK(with.iso() == doctest::Approx(0.25));
+    CHECK(with.imageName() == "density"); // the iso grid is not taken for the image
+    CHECK_FALSE(riemesh::NanoVolume::read(dir / "without.nvdb").hasIso());
+}
+
+TEST_CASE("downsample: block averages keep the image's world placement and values")
+{
+    TempDir dir;
+    initialize();
+    // A linear ramp v = x + 2y + 3z (world = index + 0.5 offset, voxel 1.5): the mean over a block
+    // is the ramp at the block centre, so every output voxel must read the ramp at its own centre.
+    auto grid = openvdb::FloatGrid::create(0.0f);
+    auto xform = openvdb::math::Transform::createLinearTransform(1.5);
+    xform->postTranslate(openvdb::Vec3d(0.5, -1.0, 2.0));
+    grid->setTransform(xform);
+    grid->setName("ramp");
+    auto acc = grid->getAccessor();
+    for (int k = 0; k < 12; ++k)
+        for (int j = 0; j < 12; ++j)
+            for (int i = 0; i < 12; ++i) {
+                const auto w = grid->indexToWorld(Coord(i, j, k));
+                acc.setValue(Coord(i, j, k), float(w.x() + 2 * w.y() + 3 * w.z()));
+            }
+    writeVdb(dir / "ramp.vdb", {grid});
+    Volume v = Volume::read(dir / "ramp.vdb", "ramp");
+    v.downsample(3);
+    CHECK(v.info().dims[0] == 4);
+    CHECK(v.info().voxelSize == doctest::Approx(4.5));
+    const riemesh::NanoVolume nano = v.nano();
+    riemesh::NanoImage image(nano.imageGrid());
+    for (const riemesh::Vec3 x : {riemesh::Vec3(5, 3, 9), riemesh::Vec3(9.2, 8.1, 12.3)}) {
+        double value;
+        riemesh::Vec3 g;
+        image.sample(x, value, g);
+        CHECK(value == doctest::Approx(x.x() + 2 * x.y() + 3 * x.z()).epsilon(1e-4));
+    }
+    CHECK_THROWS(v.downsample(0));
+}

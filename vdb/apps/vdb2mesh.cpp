@@ -61,6 +61,7 @@ struct Args {
     int threads = 0;
     bool quiet = false;
     bool openBorders = false;
+    int downsample = 1;
 };
 
 void usage(std::FILE* out)
@@ -82,6 +83,7 @@ void usage(std::FILE* out)
         "  --iso V              isovalue, image intensity (default: 0.5 for fog volumes, 0 for level\n"
         "                       sets; required for other images, e.g. --iso 40 for a T1 head MRI)\n"
         "  --smooth S           Gaussian smoothing of the image the model fits, voxels (default %g; 0 = off)\n"
+        "  --downsample F       average F^3 voxel blocks first (integer, default 1 = off): a quick preview\n"
         "  --open-borders       where the object touches the image box (a head cut at the neck), let the\n"
         "                       surface follow the cut slice into the object; by default the object is\n"
         "                       closed just beyond the border, its footprint's enclosed holes filled\n"
@@ -169,6 +171,7 @@ Args parseArgs(int argc, char** argv)
         else if (f == "--threads") a.threads = parseCount(f, value(), 1);
         else if (f == "-q" || f == "--quiet") a.quiet = true;
         else if (f == "--open-borders") a.openBorders = true;
+        else if (f == "--downsample") a.downsample = parseCount(f, value(), 1);
         else if (f.size() > 1 && f[0] == '-') throw BadInput("unknown option '" + f + "' (see --help)");
         else positional.push_back(f);
     }
@@ -334,6 +337,7 @@ int main(int argc, char** argv)
         } catch (const std::exception& e) {
             throw BadInput(e.what());
         }
+        if (args.downsample > 1) volume.downsample(args.downsample);
         readSeconds = secondsSince(readStart);
         const auto& info = volume.info();
         if (args.iso) {
@@ -394,7 +398,7 @@ int main(int argc, char** argv)
         if (gInterrupted) return interrupted();
 
         if (!args.writeMetric.empty()) volume.writeMetric(args.writeMetric);
-        if (!args.exportNvdb.empty()) volume.exportNanoVDB(args.exportNvdb);
+        if (!args.exportNvdb.empty()) volume.exportNanoVDB(args.exportNvdb, iso);
 
         NanoImage image(nano.imageGrid());
         EuclideanMetric euclidean;
@@ -451,7 +455,7 @@ int main(int argc, char** argv)
               << ", \"mu_max\": " << args.muMax << ", \"sigma_voxels\": " << args.sigma << ", \"rho_voxels\": "
               << args.rho << ", \"smooth_voxels\": " << args.smooth << ", \"max_iterations\": " << args.maxIterations
               << ", \"init\": " << jsonString(args.init) << ", \"open_borders\": " << (args.openBorders ? "true" : "false")
-              << ", \"border_voxels_added\": " << borderVoxels << "},\n";
+              << ", \"border_voxels_added\": " << borderVoxels << ", \"downsample\": " << args.downsample << "},\n";
             if (args.riemannian)
                 j << "  \"metric\": {\"active_voxels\": " << metricStats.activeVoxels << ", \"total_voxels\": "
                   << metricStats.totalVoxels << ", \"xi_ref\": " << metricStats.xiRef << ", \"threshold\": "

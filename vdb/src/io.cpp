@@ -251,9 +251,15 @@ NanoVolume toNanoVolume(const openvdb::FloatGrid& image, const openvdb::Vec3fGri
 }
 
 void writeNvdb(const std::string& path, const openvdb::FloatGrid& image, const openvdb::Vec3fGrid* metricDiag,
-               const openvdb::Vec3fGrid* metricOff)
+               const openvdb::Vec3fGrid* metricOff, double iso)
 {
-    const auto handles = toNanoHandles(image, metricDiag, metricOff);
+    auto handles = toNanoHandles(image, metricDiag, metricOff);
+    if (std::isfinite(iso)) {
+        openvdb::FloatGrid isoGrid{float(iso)};
+        isoGrid.setName(riemesh::kIsoGrid);
+        isoGrid.tree().setValueOn(openvdb::Coord(0), float(iso));
+        handles.push_back(toNano(isoGrid));
+    }
     writeFileAtomically(path, [&](const std::string& temp) {
         nanovdb::io::writeGrids<nanovdb::HostBuffer, std::vector>(temp, handles);
     });

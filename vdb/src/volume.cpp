@@ -273,9 +273,52 @@ void Volume::writeMetric(const std::string& path) const
     writeVdb(path, {mImpl->diag, mImpl->off});
 }
 
-void Volume::exportNanoVDB(const std::string& path) const
+void Volume::exportNanoVDB(const std::string& path, double iso) const
 {
-    writeNvdb(path, *mImpl->image, mImpl->diag.get(), mImpl->off.get());
+    writeNvdb(path, *mImpl->image, mImpl->diag.get(), mImpl->off.get(), iso);
+}
+
+void Volume::downsample(int factor)
+{
+    if (factor < 1) throw std::invalid_argument("downsample: factor must be >= 1");
+    if (factor == 1) return;
+    const auto& in = *mImpl->image;
+    const openvdb::CoordBBox box = in.evalActiveVoxelBoundingBox();
+    auto out = openvdb::FloatGrid::create(in.background());
+    out->setName(in.getName());
+    out->setGridClass(in.getGridClass());
+    // Output voxel c covers input voxels box.min + f*c + [0, f)^3; its centre is at f*c + (f-1)/2 in
+    // the input's index space (relative to box.min).
+    auto xform = in.transform().copy();
+    xform->preTranslate(openvdb::Vec3d(box.min().asVec3d()) + openvdb::Vec3d(0.5 * (factor - 1)));
+    xform->preScale(double(factor));
+    out->setTransform(xform);
+    const openvdb::Coord dim = box.dim();
+    const openvdb::Coord n((dim.x() + factor - 1) / factor, (dim.y() + factor - 1) / factor, (dim.z() + factor - 1) / factor);
+    auto src = in.getConstAccessor();
+    auto dst = out->getAccessor();
+    for (int k = 0; k < n.z(); ++k)
+        for (int j = 0; j < n.y(); ++j)
+            for (int i = 0; i < n.x(); ++i) {
+                double sum = 0;
+                int count = 0;
+                for (int c = 0; c < factor; ++c)
+                    for (int b = 0; b < factor; ++b)
+                        for (int a = 0; a < factor; ++a) {
+                            const openvdb::Coord p = box.min() + openvdb::Coord(i * factor + a, j * factor + b, k * factor + c);
+                            float v;
+                            if (src.probeValue(p, v)) {
+                                sum += v;
+                                ++count;
+                            }
+                        }
+                if (count > 0) dst.setValue(openvdb::Coord(i, j, k), float(sum / count));
+            }
+    mImpl->image = out;
+    mImpl->diag.reset();
+    mImpl->off.reset();
+    mImpl->muMax = 1.0;
+    describe(mImpl->info, *out);
 }
 
 void Volume::writeSurfaceLevelSet(const std::string& path, const Mesh& mesh) const

@@ -100,6 +100,9 @@ private:
 /// Grid names in a riemesh .nvdb file.
 inline constexpr const char* kMetricDiagGrid = "metric_diag";
 inline constexpr const char* kMetricOffGrid = "metric_off";
+/// Optional one-voxel float grid holding, at the origin, the isovalue the image was segmented at
+/// (`vdb2mesh --iso 40 --export-nvdb`), so that a viewer opens the file at the same surface.
+inline constexpr const char* kIsoGrid = "riemesh_iso";
 
 /// An image and (optionally) its metric as NanoVDB grids, owning their buffers: what
 /// `vdb2mesh --export-nvdb` writes and the viewer reads.
@@ -127,10 +130,13 @@ public:
     std::string imageName() const;
     /// Grid class of the image ("fog", "levelset" or "unknown").
     std::string imageClass() const;
+    /// The isovalue stored with the image (kIsoGrid), if any.
+    bool hasIso() const { return mIsoGrid >= 0; }
+    double iso() const;
 
 private:
     std::vector<nanovdb::GridHandle<nanovdb::HostBuffer>> mHandles;
-    int mImage = -1, mDiag = -1, mOff = -1;
+    int mImage = -1, mDiag = -1, mOff = -1, mIsoGrid = -1;
     double mMuMax = 1.0;
     void index();
 };

@@ -11,6 +11,7 @@
 
 #include <nanovdb/util/GridHandle.h>
 
+#include <limits>
 #include <string>
 #include <vector>
 
@@ -28,8 +29,10 @@ toNanoHandles(const openvdb::FloatGrid& image, const openvdb::Vec3fGrid* metricD
 NanoVolume toNanoVolume(const openvdb::FloatGrid& image, const openvdb::Vec3fGrid* metricDiag = nullptr,
                         const openvdb::Vec3fGrid* metricOff = nullptr);
 
-/// Writes a .nvdb file atomically (temporary file beside `path`, then rename).
+/// Writes a .nvdb file atomically (temporary file beside `path`, then rename); a finite `iso` is
+/// stored with it (grid riemesh::kIsoGrid) for viewers.
 void writeNvdb(const std::string& path, const openvdb::FloatGrid& image,
-               const openvdb::Vec3fGrid* metricDiag = nullptr, const openvdb::Vec3fGrid* metricOff = nullptr);
+               const openvdb::Vec3fGrid* metricDiag = nullptr, const openvdb::Vec3fGrid* metricOff = nullptr,
+               double iso = std::numeric_limits<double>::quiet_NaN());
 
 } // namespace riemesh::vdb

@@ -10,6 +10,7 @@
 
 #include <cstdint>
 #include <functional>
+#include <limits>
 #include <memory>
 #include <string>
 #include <vector>
@@ -75,8 +76,13 @@ public:
 
     /// metric_diag + metric_off to a .vdb file (for Houdini / vdb_view), atomically. Needs a metric.
     void writeMetric(const std::string& path) const;
-    /// Image + metric to a .nvdb file (the web viewer's input), atomically.
-    void exportNanoVDB(const std::string& path) const;
+    /// Image + metric (+ the isovalue, when finite) to a .nvdb file (the web viewer's input), atomically.
+    void exportNanoVDB(const std::string& path, double iso = std::numeric_limits<double>::quiet_NaN()) const;
+
+    /// Replaces the image by its block average over factor^3 voxels (factor >= 1; 1 does nothing),
+    /// keeping its world placement (voxel size x factor); drops a computed metric. For previews and
+    /// small web demos.
+    void downsample(int factor);
 
     /// The mesh as a level set "surface" with this image's transform, to a .vdb file, atomically.
     void writeSurfaceLevelSet(const std::string& path, const Mesh& mesh) const;
