@@ -1,7 +1,7 @@
 // riemesh-viewer: one main loop for the native window (GLFW + OpenGL 3.3) and the browser (emscripten,
 // GLFW + WebGL2). Usage (native): riemesh-viewer [volume.nvdb] [--headless]
 //   --headless   no window: evolve to convergence and print the stats lines (for timing).
-// In the browser the page fetches the demo volume into /data/phantom.nvdb before main() runs.
+// In the browser the page fetches the demo volume into /data/<name>.nvdb and passes it as argv[1].
 #include "app.h"
 #include "render.h"
 

@@ -134,6 +134,27 @@ try {
         `iteration ${playing.iteration}, ${playing.vertices} vertices`);
   await page.screenshot({ path: path.join(outDir, 'page-evolving.png') });
 
+  // The second demo: the real head MRI (head.nvdb, iso 40 stored in the file) through the page's link.
+  if (fs.existsSync(path.join(webDir, 'head.nvdb'))) {
+    const from = consoleLines.length;
+    const headStart = Date.now();
+    await page.click('#demos a[href="?volume=head.nvdb"]');
+    let headLine;
+    while (!headLine && Date.now() - headStart < convergeTimeoutMs && pageErrors.length === 0) {
+      // Only what the new page printed: after its "loaded head.nvdb" line.
+      const lines = consoleLines.slice(from).map((l) => l.replace(/^\[\w+\] /, ''));
+      const at = lines.findIndex((l) => l.startsWith('riemesh: loaded head.nvdb'));
+      headLine = at < 0 ? undefined : lines.slice(at).find((l) => converged.test(l));
+      if (!headLine) await sleep(250);
+    }
+    const headState = headLine ? await state() : {};
+    check('the head demo opens at its stored iso and converges to one skin of genus <= 2',
+          !!headLine && headState.volume === 'head.nvdb' && headState.components === 1 && headState.genus <= 2,
+          headLine ? `${headLine}; ${JSON.stringify(headState)}` : `no converged line after ${((Date.now() - headStart) / 1000).toFixed(0)} s`);
+    await sleep(500);
+    await page.screenshot({ path: path.join(outDir, 'page-head.png') });
+  }
+
   check('no page errors', pageErrors.length === 0, pageErrors.slice(0, 5).join(' | '));
 } catch (e) {
   check('the test ran', false, e.stack || String(e));
@@ -144,6 +165,6 @@ try {
   fs.rmSync(profile, { recursive: true, force: true });
 }
 const failed = results.filter((r) => !r.ok).length;
-console.log(`screenshots: ${outDir}/page.png, page-evolving.png`);
+console.log(`screenshots: ${outDir}/page.png, page-evolving.png, page-head.png`);
 console.log(`web: ${results.length - failed} passed, ${failed} failed`);
 process.exit(failed ? 1 : 0);
