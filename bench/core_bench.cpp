@@ -1,6 +1,6 @@
 // core_bench: speed of the portable core on analytic images (no OpenVDB).
 //
-//   core_bench [--quick]
+//   core_bench [--quick] [--scaling-only]
 //
 // 1. Cost per iteration against the vertex count (1k, 5k, 20k, 80k vertices on a converged
 //    sphere): one full iteration = forces, integration, regularity, collision, topology.
@@ -193,8 +193,11 @@ int fullRuns(bool quick)
 int main(int argc, char** argv)
 {
     const bool quick = argc > 1 && std::strcmp(argv[1], "--quick") == 0;
+    // --scaling-only: just the per-iteration cost table (for profilers such as callgrind).
+    const bool scalingOnly = argc > 1 && std::strcmp(argv[argc - 1], "--scaling-only") == 0;
     std::printf("riemesh core_bench%s (one thread)\n", quick ? " --quick" : "");
     scaling(quick);
+    if (scalingOnly) return 0;
     const int unexpected = fullRuns(quick);
     if (unexpected) std::printf("\n%d run(s) did not end as expected\n", unexpected);
     return unexpected ? 1 : 0;
