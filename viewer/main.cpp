@@ -129,6 +129,23 @@ EMSCRIPTEN_KEEPALIVE int riemesh_load(const char* path)
 {
     return gViewer && gViewer->app.loadVolume(path) ? 1 : 0;
 }
+/// Draw cost of the current scene, apart from the browser's frame pacing and compositing: renders
+/// it `count` times, each finished by a one-pixel read back (which waits for the GPU process), and
+/// returns the mean milliseconds per render (benchmarks only).
+EMSCRIPTEN_KEEPALIVE double riemesh_time_draw(int count)
+{
+    if (!gViewer || count <= 0) return -1;
+    Viewer& v = *gViewer;
+    int width = 0, height = 0;
+    glfwGetFramebufferSize(v.window, &width, &height);
+    v.renderer->finish();
+    const double start = emscripten_get_now();
+    for (int i = 0; i < count; ++i) {
+        v.renderer->draw(v.app.scene(), width, height);
+        v.renderer->finish();
+    }
+    return (emscripten_get_now() - start) / count;
+}
 }
 #endif
 

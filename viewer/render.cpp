@@ -243,11 +243,16 @@ void Renderer::draw(const Scene& scene, int width, int height)
     const Vec3f eye = scene.camera.eye();
 
     if (scene.showMesh && mTriangleCount > 0) {
+        // The mesh is closed and oriented outward (counter-clockwise seen from outside): its back
+        // faces are always hidden, and culling them halves what software WebGL rasterises.
+        glEnable(GL_CULL_FACE);
+        glCullFace(GL_BACK);
         glUseProgram(mMeshProgram);
         glUniformMatrix4fv(glGetUniformLocation(mMeshProgram, "uViewProjection"), 1, GL_FALSE, vp.data());
         glUniform3f(glGetUniformLocation(mMeshProgram, "uEye"), eye.x(), eye.y(), eye.z());
         glBindVertexArray(mMeshVao);
         glDrawElements(GL_TRIANGLES, mTriangleCount, GL_UNSIGNED_INT, nullptr);
+        glDisable(GL_CULL_FACE);
     }
     glUseProgram(mLineProgram);
     glUniformMatrix4fv(glGetUniformLocation(mLineProgram, "uViewProjection"), 1, GL_FALSE, vp.data());
@@ -278,6 +283,15 @@ void Renderer::draw(const Scene& scene, int width, int height)
     }
     glBindVertexArray(0);
     glUseProgram(0);
+}
+
+void Renderer::finish()
+{
+    // glFinish alone does not wait in WebGL (Chromium returns at once); reading a pixel back does:
+    // the GPU process must execute everything before it.
+    unsigned char pixel[4];
+    glFinish();
+    glReadPixels(0, 0, 1, 1, GL_RGBA, GL_UNSIGNED_BYTE, pixel);
 }
 
 } // namespace riemesh::viewer

@@ -21,6 +21,9 @@ public:
 
     /// Clears the framebuffer (width x height pixels) and draws the scene's mesh and slice.
     void draw(const Scene& scene, int width, int height);
+    /// Waits until every GL command issued so far has executed (a one-pixel read back; for draw-time
+    /// benchmarks).
+    void finish();
 
 private:
     unsigned mMeshProgram = 0, mLineProgram = 0, mSliceProgram = 0;

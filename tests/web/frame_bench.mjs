@@ -35,6 +35,13 @@ try {
   await page.goto(`http://127.0.0.1:${server.address().port}/`);
   const state = async () => page.evaluate(() => window.riemesh.state());
   while (!(await page.evaluate(() => !!(window.riemesh && window.riemesh.state)))) await sleep(200);
+  {
+    // The same draw with the demo's own coarse mesh first, for a ratio in the same run.
+    let c = await state();
+    while (c.state !== 'converged' && c.state !== 'iteration-cap') { await sleep(500); c = await state(); }
+    const coarseMs = await page.evaluate(() => Module.ccall('riemesh_time_draw', 'number', ['number'], [20]));
+    console.log(`frame_bench: draw of the demo's ${c.vertices}-vertex mesh ${coarseMs.toFixed(1)} ms`);
+  }
   await page.evaluate((d) => { window.riemesh.set('riemannian', 0); window.riemesh.set('delta', d); window.riemesh.play(); }, delta);
   const started = Date.now();
   let s = await state();
@@ -43,6 +50,9 @@ try {
   const frames = [];
   for (let i = 0; i < 10; i++) { await sleep(300); frames.push((await state()).frameMs); }
   frames.sort((a, b) => a - b);
+  // The draw itself (mesh, wireframe, slice), each waited for by a pixel read back: what the mesh costs.
+  const drawMs = await page.evaluate(() => Module.ccall('riemesh_time_draw', 'number', ['number'], [20]));
+  console.log(`frame_bench: draw of the scene ${drawMs.toFixed(1)} ms (mean of 20, each waited for)`);
   console.log(`frame_bench: ${s.vertices} vertices (${s.state} after ${s.iteration} iterations), ` +
               `paused frame interval median ${frames[5].toFixed(1)} ms, min ${frames[0].toFixed(1)} ms ` +
               `(headless Chromium, software WebGL)`);
