@@ -28,3 +28,9 @@ if(RIEMESH_THIRD_PARTY_INCLUDE)
 endif()
 target_compile_definitions(riemesh_core PUBLIC _USE_MATH_DEFINES)
 target_link_libraries(riemesh_core PUBLIC ${RIEMESH_OPENMESH_TARGET} PRIVATE riemesh_warnings)
+# The exact predicates' expansion arithmetic needs every product rounded on its own (no fused
+# multiply-add contraction).
+if(CMAKE_CXX_COMPILER_ID MATCHES "GNU|Clang")
+  set_source_files_properties(${PROJECT_SOURCE_DIR}/core/src/detail/predicates.cpp
+                              PROPERTIES COMPILE_OPTIONS -ffp-contract=off)
+endif()

@@ -8,6 +8,7 @@
 #include "riemesh/topology.h"
 
 #include "detail/mesh_walk.h"
+#include "detail/triangle_intersection.h"
 
 #include <algorithm>
 #include <array>
@@ -204,6 +205,118 @@ void tagCut(Mesh& mesh, const std::vector<VertexHandle>& seeds, int rings)
     }
 }
 
+using Triangle = std::array<VertexHandle, 3>;
+
+/// The band of merge (Fig. 3a) that zips loop `a` (forward) with loop `b` (backward) starting from
+/// the cross edge a[i0]-b[j0]. State (i, k): the current cross edge joins A(i) and B(-k); an A step
+/// adds (A(i), A(i+1), B(-k)) over the boundary halfedge A(i)->A(i+1), a B step adds
+/// (B(-k-1), B(-k), A(i)) over B(-k-1)->B(-k). The band is an annulus only if no cross edge appears
+/// twice: states equal modulo (n, m) are joined by the same edge, so a step into an already visited
+/// state is refused (except the final (n, m) = (0, 0)). At most one of the two steps is ever
+/// refused, and the shorter new cross edge wins otherwise. `length` receives the summed length of
+/// the cross edges (world units). False when the zip gets stuck.
+bool zipBand(const Mesh& mesh, const std::vector<VertexHandle>& a, const std::vector<VertexHandle>& b, int i0, int j0,
+             std::vector<Triangle>& band, double& length)
+{
+    const int n = int(a.size()), m = int(b.size());
+    auto A = [&](int i) { return a[(((i0 + i) % n) + n) % n]; };
+    auto B = [&](int j) { return b[(((j0 + j) % m) + m) % m]; };
+    band.clear();
+    length = distance(mesh, A(0), B(0));
+    std::vector<char> visited(std::size_t(n) * m, 0);
+    auto isVisited = [&](int i, int k) { return visited[std::size_t(i % n) * m + (k % m)] != 0; };
+    visited[0] = 1;
+    int i = 0, k = 0;
+    while (i < n || k < m) {
+        const bool closing = (i + 1 == n && k == m) || (i == n && k + 1 == m);
+        const bool canA = i < n && (closing || !isVisited(i + 1, k));
+        const bool canB = k < m && (closing || !isVisited(i, k + 1));
+        if (!canA && !canB) return false;
+        const double lengthA = distance(mesh, A(i + 1), B(-k)), lengthB = distance(mesh, A(i), B(-k - 1));
+        const bool stepA = !canB || (canA && lengthA <= lengthB);
+        if (stepA) {
+            band.push_back({A(i), A(i + 1), B(-k)});
+            ++i;
+        } else {
+            band.push_back({B(-k - 1), B(-k), A(i)});
+            ++k;
+        }
+        if (!closing) length += stepA ? lengthA : lengthB;
+        visited[std::size_t(i % n) * m + (k % m)] = 1;
+    }
+    return true;
+}
+
+/// True when the band faces meet neither each other nor any face of the mesh that stays (all but
+/// the one-rings of u and w), beyond the vertices and edges they share (exact tests, see
+/// riemesh/self_intersection.h). A band that folds or twists, or cuts through a nearby sheet,
+/// would leave the surface self-intersecting.
+bool isBandEmbedded(const Mesh& mesh, VertexHandle u, VertexHandle w, const std::vector<Triangle>& band)
+{
+    using detail::TriangleRef;
+    auto corners = [&](const Triangle& t) {
+        return detail::makeTriangle(mesh.point(t[0]).data(), mesh.point(t[1]).data(), mesh.point(t[2]).data());
+    };
+    auto ids = [](const Triangle& t) { return std::array<int, 3>{t[0].idx(), t[1].idx(), t[2].idx()}; };
+    Eigen::AlignedBox3d box;
+    std::vector<TriangleRef> refs;
+    for (const Triangle& t : band) {
+        refs.push_back(corners(t));
+        if (refs.back().axis < 0) return false; // a flat band face
+        for (auto v : t) box.extend(position(mesh, v));
+    }
+    for (std::size_t i = 0; i < band.size(); ++i)
+        for (std::size_t j = i + 1; j < band.size(); ++j)
+            if (detail::classifyTriangles(ids(band[i]), refs[i], ids(band[j]), refs[j]) != detail::TriangleContact::None)
+                return false;
+    // The faces that stay, near the band: one pass over the face list, as cheap as the backup copy
+    // merge makes anyway (merges are rare events).
+    for (auto f : mesh.faces()) {
+        const Triangle t = faceVertices(mesh, f);
+        if (std::find(t.begin(), t.end(), u) != t.end() || std::find(t.begin(), t.end(), w) != t.end()) continue;
+        Eigen::AlignedBox3d faceBox;
+        for (auto v : t) faceBox.extend(position(mesh, v));
+        if (!box.intersects(faceBox)) continue;
+        const TriangleRef ref = corners(t);
+        if (ref.axis < 0) continue; // a degenerate face of the surface: nothing to cross
+        for (std::size_t i = 0; i < band.size(); ++i)
+            if (detail::classifyTriangles(ids(band[i]), refs[i], ids(t), ref) != detail::TriangleContact::None)
+                return false;
+    }
+    return true;
+}
+
+/// The band merge(u, w) adds: of the zips from every pair of loop vertices, the one with the
+/// shortest cross edges in total that is embedded. Starting at the closest pair alone twists the
+/// band when the two loops are tilted or offset against each other (seen when the two ends of a
+/// tube meet at an angle), and a twisted band crosses itself. False when no zip is embedded.
+bool chooseBand(const Mesh& mesh, VertexHandle u, VertexHandle w, std::vector<Triangle>& band)
+{
+    std::vector<VertexHandle> a, b;
+    if (!collectLoop(mesh, u, a) || !collectLoop(mesh, w, b)) return false;
+    struct Zip {
+        double length;
+        int i0, j0;
+    };
+    std::vector<Zip> zips;
+    std::vector<Triangle> faces;
+    for (int i0 = 0; i0 < int(a.size()); ++i0)
+        for (int j0 = 0; j0 < int(b.size()); ++j0) {
+            double length = 0;
+            if (zipBand(mesh, a, b, i0, j0, faces, length)) zips.push_back({length, i0, j0});
+        }
+    std::sort(zips.begin(), zips.end(), [](const Zip& x, const Zip& y) {
+        return x.length != y.length ? x.length < y.length : std::make_pair(x.i0, x.j0) < std::make_pair(y.i0, y.j0);
+    });
+    for (const Zip& z : zips) {
+        double length = 0;
+        zipBand(mesh, a, b, z.i0, z.j0, band, length);
+        if (isBandEmbedded(mesh, u, w, band)) return true;
+    }
+    band.clear();
+    return false;
+}
+
 } // namespace
 
 bool canMerge(const Mesh& mesh, VertexHandle u, VertexHandle w)
@@ -226,68 +339,22 @@ bool canMerge(const Mesh& mesh, VertexHandle u, VertexHandle w)
     for (auto x : a)
         for (auto y : mesh.vv_range(x))
             if (contains(b, y)) return false;
-    return true;
+    std::vector<Triangle> band;
+    return chooseBand(mesh, u, w, band);
 }
 
 bool merge(Mesh& mesh, VertexHandle u, VertexHandle w)
 {
-    if (!canMerge(mesh, u, w)) return false;
-    std::vector<VertexHandle> a, b;
-    collectLoop(mesh, u, a);
-    collectLoop(mesh, w, b);
-    const int n = int(a.size()), m = int(b.size());
-
-    // Start at the closest pair of loop vertices.
-    int i0 = 0, j0 = 0;
-    double best = std::numeric_limits<double>::infinity();
-    for (int i = 0; i < n; ++i)
-        for (int j = 0; j < m; ++j) {
-            const double d = distance(mesh, a[i], b[j]);
-            if (d < best) { best = d; i0 = i; j0 = j; }
-        }
-    std::rotate(a.begin(), a.begin() + i0, a.end());
-    std::rotate(b.begin(), b.begin() + j0, b.end());
-    auto A = [&](int i) { return a[((i % n) + n) % n]; };
-    auto B = [&](int j) { return b[((j % m) + m) % m]; };
-
+    std::vector<Triangle> band;
+    if (!canMerge(mesh, u, w) || !chooseBand(mesh, u, w, band)) return false;
     const Mesh backup = mesh;
     mesh.delete_vertex(u, false);
     mesh.delete_vertex(w, false);
-
-    // Zip: A forward, B backward. State (i, k): the current cross edge joins A(i) and B(-k); an A
-    // step adds (A(i), A(i+1), B(-k)) using the boundary halfedge A(i)->A(i+1); a B step adds
-    // (B(-k-1), B(-k), A(i)) using the boundary halfedge B(-k-1)->B(-k). The band is an annulus
-    // only if no cross edge appears twice: states equal modulo (n, m) are joined by the same edge,
-    // so a step into an already visited state is refused (except the final (n, m) = (0, 0)). At
-    // most one of the two steps is ever refused, and the shorter new diagonal wins otherwise.
-    std::vector<char> visited(std::size_t(n) * m, 0);
-    auto isVisited = [&](int i, int k) { return visited[std::size_t(i % n) * m + (k % m)] != 0; };
-    visited[0] = 1;
-    int i = 0, k = 0;
-    bool ok = true;
-    while (ok && (i < n || k < m)) {
-        const bool closing = (i + 1 == n && k == m) || (i == n && k + 1 == m);
-        const bool canA = i < n && (closing || !isVisited(i + 1, k));
-        const bool canB = k < m && (closing || !isVisited(i, k + 1));
-        bool stepA;
-        if (!canA && !canB) { ok = false; break; }
-        if (!canB) stepA = true;
-        else if (!canA) stepA = false;
-        else stepA = distance(mesh, A(i + 1), B(-k)) <= distance(mesh, A(i), B(-k - 1));
-        FaceHandle f;
-        if (stepA) {
-            f = mesh.add_face(A(i), A(i + 1), B(-k));
-            ++i;
-        } else {
-            f = mesh.add_face(B(-k - 1), B(-k), A(i));
-            ++k;
+    for (const Triangle& t : band) {
+        if (!mesh.add_face(t[0], t[1], t[2]).is_valid()) {
+            mesh = backup;
+            return false;
         }
-        visited[std::size_t(i % n) * m + (k % m)] = 1;
-        ok = f.is_valid();
-    }
-    if (!ok) {
-        mesh = backup;
-        return false;
     }
     return true;
 }

@@ -5,6 +5,7 @@
 #include "riemesh/collision.h"
 #include "riemesh/evolution.h"
 #include "riemesh/primitives.h"
+#include "riemesh/self_intersection.h"
 
 #include <doctest/doctest.h>
 
@@ -55,6 +56,10 @@ EvolutionStats runChecked(Mesh& mesh, const ScalarImage& image, const MetricFiel
     const auto stats = evolve(mesh, image, metric, o);
     REQUIRE(failures == 0);
     if (!(allowEmpty && mesh.n_faces() == 0)) REQUIRE_MESH_OK(mesh);
+    // The result is an embedded surface: no two faces cross or fold onto each other.
+    const auto self = findSelfIntersections(mesh);
+    INFO("crossings " << self.crossings << ", vertex folds " << self.vertexFolds << ", edge folds " << self.edgeFolds);
+    CHECK(self.count() == 0);
     return stats;
 }
 

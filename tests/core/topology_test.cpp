@@ -1,6 +1,7 @@
 #include "mesh_invariants.h"
 #include "riemesh/collision.h"
 #include "riemesh/primitives.h"
+#include "riemesh/self_intersection.h"
 #include "riemesh/topology.h"
 #include "topology_fixtures.h"
 
@@ -346,4 +347,39 @@ TEST_CASE("topology: randomized collisions and tunnel cuts keep the mesh valid a
     MESSAGE("randomized topology events: " << events << " (" << merges << " merges, " << cuts << " cuts)");
     CHECK(merges > 50);
     CHECK(cuts > 10);
+}
+
+TEST_CASE("merge: the band never crosses itself or the surface, even between tilted and offset loops")
+{
+    // Two spheres at random offsets, merged between random nearby vertices whose one-rings face
+    // each other at an angle (as when the two ends of a curved tube meet). Zipping from the closest
+    // pair of loop vertices alone twisted such bands into crossing faces; merge must either build an
+    // embedded band or refuse.
+    std::mt19937 rng(3);
+    std::uniform_real_distribution<double> unit(-1.0, 1.0);
+    int merged = 0, refused = 0;
+    for (int trial = 0; trial < 300; ++trial) {
+        Mesh mesh = makeIcosphere(Vec3::Zero(), 1.0, 1 + trial % 2);
+        const int firstB = int(mesh.n_vertices());
+        const Vec3 direction = Vec3(unit(rng), unit(rng), unit(rng)).normalized();
+        appendMesh(mesh, makeIcosphere(direction * (2.0 + 0.3 * (unit(rng) + 1)), 1.0, 1 + (trial / 2) % 2));
+        prepareMesh(mesh);
+        const VertexHandle u = fixtures::extremeVertex(mesh, direction); // on A, facing B (A's extreme)
+        std::vector<VertexHandle> near;
+        for (int i = firstB; i < int(mesh.n_vertices()); ++i)
+            if ((position(mesh, VertexHandle(i)) - position(mesh, u)).norm() < 1.4) near.push_back(VertexHandle(i));
+        if (near.empty()) continue;
+        const VertexHandle w = near[std::size_t(rng() % near.size())];
+        if (merge(mesh, u, w)) {
+            ++merged;
+            CHECK_MESH_OK(mesh);
+            const auto self = findSelfIntersections(mesh);
+            INFO("trial " << trial << ": crossings " << self.crossings << ", vertex folds " << self.vertexFolds);
+            CHECK(self.count() == 0);
+        } else {
+            ++refused;
+        }
+    }
+    MESSAGE("tilted merges: " << merged << " merged, " << refused << " refused");
+    CHECK(merged > 50);
 }

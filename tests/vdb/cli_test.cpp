@@ -202,11 +202,13 @@ TEST_CASE("vdb2mesh: a noisy ball phantom becomes one closed genus-0 mesh close 
     INFO(r.err);
     REQUIRE(r.code == 0);
     CHECK(r.out.find("1 component, genus 0") != std::string::npos);
+    CHECK(r.out.find(", 0 self-intersections,") != std::string::npos); // an embedded surface
     CHECK(lineCount(r.out) == 1);
     CHECK(fs::file_size(f.path("ball.ply")) > 1000);
     const std::string json = slurp(f.path("ball.json"));
     CHECK(json.find("\"iterations\": [") != std::string::npos);
     CHECK(json.find("\"genus\": 0") != std::string::npos);
+    CHECK(json.find("\"self_intersections\": 0,") != std::string::npos);
     CHECK(json.find("\"hausdorff_voxels\"") != std::string::npos);
     {
         openvdb::io::File metric(f.path("metric.vdb"));

@@ -2,6 +2,7 @@
 // model. Thin: parse and check everything, call riemesh::vdb and riemesh, report.
 #include "riemesh/evolution.h"
 #include "riemesh/mesh_io.h"
+#include "riemesh/self_intersection.h"
 #include "riemesh/vdb/volume.h"
 
 #include "cli.h"
@@ -438,6 +439,7 @@ int main(int argc, char** argv)
         }
         const double writeSeconds = secondsSince(writeStart);
         const MeshTopology topo = topologyOf(mesh);
+        const std::size_t selfIntersections = findSelfIntersections(mesh).count(); // 0 for an embedded surface
         const double seconds = secondsSince(start);
 
         std::optional<vdb::ReferenceError> ref;
@@ -471,6 +473,7 @@ int main(int argc, char** argv)
             }
             j << "\n  ],\n  \"summary\": {\"vertices\": " << topo.vertices << ", \"faces\": " << topo.faces
               << ", \"components\": " << topo.components << ", \"genus\": " << topo.genus << ", \"euler\": " << topo.euler
+              << ", \"self_intersections\": " << selfIntersections
               << ", \"iterations\": " << evo.iterations.size() << ", \"stop\": " << jsonString(toString(evo.reason))
               << ", \"seconds\": " << seconds << ", \"read_seconds\": " << readSeconds << ", \"metric_seconds\": "
               << metricSeconds << ", \"evolve_seconds\": " << evo.seconds << ", \"write_seconds\": " << writeSeconds
@@ -491,10 +494,11 @@ int main(int argc, char** argv)
         }
 
         if (!args.quiet) {
-            std::printf("%s: %zu vertices, %zu faces, %d component%s, genus %d, %zu iterations (%s), %.2f s "
-                        "(metric %.2f, evolve %.2f)",
+            std::printf("%s: %zu vertices, %zu faces, %d component%s, genus %d, %zu self-intersections, %zu iterations "
+                        "(%s), %.2f s (metric %.2f, evolve %.2f)",
                         args.output.c_str(), topo.vertices, topo.faces, topo.components, topo.components == 1 ? "" : "s",
-                        topo.genus, evo.iterations.size(), toString(evo.reason), seconds, metricSeconds, evo.seconds);
+                        topo.genus, selfIntersections, evo.iterations.size(), toString(evo.reason), seconds,
+                        metricSeconds, evo.seconds);
             if (ref)
                 std::printf("; vs reference: mean %.3f, Hausdorff %.3f voxels", ref->mean / ref->voxelSize,
                             ref->hausdorff / ref->voxelSize);

@@ -33,11 +33,14 @@ struct TunnelCandidate {
 inline constexpr const char* kCutIdProperty = "riemesh:cut_id";
 
 /// True when merge(u, w) can run: both alive and distinct, not adjacent, closed one-rings
-/// disjoint, valence >= 3 each, and no edge already joins a neighbour of u to a neighbour of w.
+/// disjoint, valence >= 3 each, no edge already joins a neighbour of u to a neighbour of w, and
+/// the two loops can be joined by a band that is embedded: its faces cross neither each other nor
+/// the rest of the surface (exact tests; see self_intersection.h for what counts).
 bool canMerge(const Mesh& mesh, VertexHandle u, VertexHandle w);
 /// Fig. 3a. Returns false (mesh untouched) when canMerge is false. Orientation is forced by the
-/// boundary halfedges of the two loops; the band starts at the closest pair of loop vertices and
-/// zips greedily along the shorter diagonal. No vertex is moved.
+/// boundary halfedges of the two loops; the band zips greedily along the shorter diagonal from a
+/// starting pair of loop vertices: of all starting pairs, the embedded band with the shortest
+/// cross edges in total. No vertex is moved.
 bool merge(Mesh& mesh, VertexHandle u, VertexHandle w);
 
 /// True when cutTunnel(u, v, w) can run: the three edges exist, (u, v, w) is not a face, and the
