@@ -449,21 +449,25 @@ class Report:
                            "most accurate setting when none is.\n" % (best["setting"], fmt(best["vertices"]),
                                                                      fmt(best["mean_voxels"])))
         # Pareto plot: vertices (log x) against mean error.
-        data = {"pareto_vdb.dat": "".join("%d %.5g %s\n" % (x["vertices"], x["mean_voxels"], x["setting"].split("a=")[-1])
+        def vdb_label(x):  # a few labels only: neighbouring adaptivities overlap
+            a = x["setting"].split("a=")[-1]
+            return a if a in ("0.00", "0.10", "0.50", "0.90", "1.00") else '""'
+        short = {"coarse Euclidean": "CE", "Riemannian": "R", "fine Euclidean": "FE"}
+        data = {"pareto_vdb.dat": "".join("%d %.5g %s\n" % (x["vertices"], x["mean_voxels"], vdb_label(x))
                                           for x in vdb_rows),
                 "pareto_mc.dat": "".join("%d %.5g\n" % (x["vertices"], x["mean_voxels"])
                                          for x in rows if ok(x) and x["tool"] == "marching-cubes"),
-                "pareto_riemesh.dat": "".join('%d %.5g "%s"\n' % (x["vertices"], x["mean"], x["model"])
+                "pareto_riemesh.dat": "".join('%d %.5g "%s"\n' % (x["vertices"], x["mean"], short.get(x["model"], x["model"]))
                                               for x in riemesh if ok(x) and "mean" in x)}
         b.plot("pareto_phantom.png",
                'set logscale x\nset xlabel "vertices"\nset ylabel "mean distance to the true surface (voxels)"\n'
                'set title "Phantom (noise 0.5): vertices against error (lower left is better)"\n'
-               "set key top right\nset yrange [0:*]\n"
+               "set key bottom right\nset yrange [0:*]\n"
                'plot "pareto_vdb.dat" using 1:2 with linespoints pt 7 lw 2 title "OpenVDB volumeToMesh (labels: adaptivity)", '
                '"pareto_vdb.dat" using 1:2:3 with labels offset 0,1 notitle, '
                '"pareto_mc.dat" using 1:2 with points pt 5 ps 2 title "marching cubes", '
-               '"pareto_riemesh.dat" using 1:2 with points pt 9 ps 2.5 lc rgb "red" title "riemesh", '
-               '"pareto_riemesh.dat" using 1:2:3 with labels offset 0,1.3 tc rgb "red" notitle', data)
+               '"pareto_riemesh.dat" using 1:2 with points pt 9 ps 2.5 lc rgb "red" title "riemesh (CE coarse Euclidean, R Riemannian, FE fine Euclidean)", '
+               '"pareto_riemesh.dat" using 1:2:3 with labels left offset 1.2,0 tc rgb "red" notitle', data)
         self.image(os.path.join(b.out, "pareto_phantom.png"), "Pareto plot")
         pics = []
         for x in ([best] if best else []) + [x for x in rows if ok(x) and x["tool"] == "marching-cubes"]:
@@ -471,7 +475,8 @@ class Report:
             name = "".join(c if c.isalnum() or c in ".-" else "_" for c in name)
             obj = os.path.join(b.work, "peers", name + ".obj")
             png = os.path.join(b.out, "peer_%s.png" % x["tool"])
-            if os.path.exists(obj) and b.render(obj, png, "%s %s: %s vertices" % (x["tool"], x["setting"], fmt(x["vertices"])), ["--wire"]):
+            if os.path.exists(obj) and b.render(obj, png, "%s %s: %s vertices" % (x["tool"], x["setting"], fmt(x["vertices"])),
+                                                ["--wire", "--clip", "y:%g" % (0.5 * (self.size - 1))]):
                 pics.append(("%s %s" % (x["tool"], x["setting"]), os.path.basename(png)))
         if pics:
             self.md.append("\n| " + " | ".join(p[0] for p in pics) + " |\n|" + "---|" * len(pics) + "\n| " +

@@ -327,8 +327,9 @@ Args parseArgs(int argc, char** argv)
             std::string list = value();
             for (std::size_t start = 0; start <= list.size();) {
                 const auto comma = std::min(list.find(',', start), list.size());
-                const double x = apps::parseNumber(f, list.substr(start, comma - start));
-                if (x < 0 || x > 1) throw BadInput("--adaptivity: " + std::to_string(x) + " is outside [0, 1]");
+                const std::string item = list.substr(start, comma - start);
+                const double x = apps::parseNumber(f, item);
+                if (x < 0 || x > 1) throw BadInput("--adaptivity: '" + item + "' is outside [0, 1]");
                 a.adaptivities.push_back(x);
                 start = comma + 1;
             }
