@@ -41,6 +41,7 @@ constexpr int kMaxIterations = 3000;
 
 /// Bad input or parameters: exit 1.
 using riemesh::apps::BadInput;
+using riemesh::apps::parseCount;
 using riemesh::apps::parseNumber;
 
 volatile std::sig_atomic_t gInterrupted = 0;
@@ -115,14 +116,6 @@ void usage(std::FILE* out)
         "run leaves no partial file and an existing file untouched.\n"
         "Exit codes: 0 success, 1 bad input or parameters, 2 internal failure, 130 interrupted (Ctrl-C).\n",
         kSmooth, kDelta, kZeta, kMuMax, kSigma, kRho, kMaxIterations);
-}
-
-int parseCount(const std::string& flag, const std::string& text, int lo)
-{
-    const double v = parseNumber(flag, text);
-    if (v != std::floor(v) || v < lo || v > 1e9)
-        throw BadInput(flag + ": '" + text + "' must be an integer >= " + std::to_string(lo));
-    return int(v);
 }
 
 Args parseArgs(int argc, char** argv)

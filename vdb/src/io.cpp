@@ -269,8 +269,8 @@ void writeNvdb(const std::string& path, const openvdb::FloatGrid& image, const o
 
 namespace {
 
-void meshArrays(const Mesh& mesh, const openvdb::math::Transform& transform, std::vector<openvdb::Vec3s>& points,
-                std::vector<openvdb::Vec3I>& triangles)
+/// The live vertices (world space) and faces of `mesh` as index arrays.
+void meshArrays(const Mesh& mesh, std::vector<openvdb::Vec3d>& points, std::vector<openvdb::Vec3I>& triangles)
 {
     std::vector<int> index(mesh.n_vertices(), -1);
     points.clear();
@@ -279,7 +279,7 @@ void meshArrays(const Mesh& mesh, const openvdb::math::Transform& transform, std
         if (mesh.status(v).deleted()) continue;
         index[v.idx()] = int(points.size());
         const auto p = mesh.point(v);
-        points.push_back(openvdb::Vec3s(transform.worldToIndex(openvdb::Vec3d(p[0], p[1], p[2]))));
+        points.emplace_back(p[0], p[1], p[2]);
     }
     for (auto f : mesh.faces()) {
         if (mesh.status(f).deleted()) continue;
@@ -290,15 +290,25 @@ void meshArrays(const Mesh& mesh, const openvdb::math::Transform& transform, std
     }
 }
 
+/// World points to the index space that meshToVolume's adapter expects.
+std::vector<openvdb::Vec3s> toIndexSpace(const std::vector<openvdb::Vec3d>& world, const openvdb::math::Transform& xform)
+{
+    std::vector<openvdb::Vec3s> points;
+    points.reserve(world.size());
+    for (const auto& p : world) points.push_back(openvdb::Vec3s(xform.worldToIndex(p)));
+    return points;
+}
+
 } // namespace
 
 openvdb::FloatGrid::Ptr meshToSurfaceLevelSet(const Mesh& mesh, const openvdb::math::Transform& transform,
                                               float halfWidth)
 {
     initialize();
-    std::vector<openvdb::Vec3s> points;
+    std::vector<openvdb::Vec3d> world;
     std::vector<openvdb::Vec3I> triangles;
-    meshArrays(mesh, transform, points, triangles);
+    meshArrays(mesh, world, triangles);
+    const std::vector<openvdb::Vec3s> points = toIndexSpace(world, transform);
     // Points are in index space (what the adapter expects); distances come out in world units.
     openvdb::tools::QuadAndTriangleDataAdapter<openvdb::Vec3s, openvdb::Vec3I> adapter(points, triangles);
     auto grid = openvdb::tools::meshToVolume<openvdb::FloatGrid>(adapter, transform, halfWidth, halfWidth);
@@ -310,6 +320,15 @@ openvdb::FloatGrid::Ptr meshToSurfaceLevelSet(const Mesh& mesh, const openvdb::m
 
 SurfaceError surfaceError(const Mesh& mesh, const openvdb::FloatGrid& sdf)
 {
+    std::vector<openvdb::Vec3d> points;
+    std::vector<openvdb::Vec3I> triangles;
+    meshArrays(mesh, points, triangles);
+    return surfaceError(points, triangles, sdf);
+}
+
+SurfaceError surfaceError(const std::vector<openvdb::Vec3d>& worldPoints, const std::vector<openvdb::Vec3I>& triangles,
+                          const openvdb::FloatGrid& sdf)
+{
     initialize();
     SurfaceError err;
     const auto& xform = sdf.transform();
@@ -317,22 +336,16 @@ SurfaceError surfaceError(const Mesh& mesh, const openvdb::FloatGrid& sdf)
     {
         openvdb::tools::GridSampler<openvdb::FloatGrid, openvdb::tools::BoxSampler> sampler(sdf);
         double sum = 0;
-        std::size_t n = 0;
-        for (auto v : mesh.vertices()) {
-            if (mesh.status(v).deleted()) continue;
-            const auto p = mesh.point(v);
-            const double d = std::abs(sampler.wsSample(openvdb::Vec3d(p[0], p[1], p[2])));
+        for (const auto& p : worldPoints) {
+            const double d = std::abs(sampler.wsSample(p));
             sum += d;
             err.maxVertexDistance = std::max(err.maxVertexDistance, d);
-            ++n;
         }
-        err.meanVertexDistance = n ? sum / double(n) : 0.0;
+        err.meanVertexDistance = worldPoints.empty() ? 0.0 : sum / double(worldPoints.size());
     }
     // Surface -> mesh: reference points on sdf = 0, distance read from the mesh's signed distance.
     {
-        std::vector<openvdb::Vec3s> points;
-        std::vector<openvdb::Vec3I> triangles;
-        meshArrays(mesh, xform, points, triangles);
+        const std::vector<openvdb::Vec3s> points = toIndexSpace(worldPoints, xform);
         openvdb::tools::QuadAndTriangleDataAdapter<openvdb::Vec3s, openvdb::Vec3I> adapter(points, triangles);
         // A signed distance (the mesh is closed) interpolates linearly across the surface, where an
         // unsigned one would read up to half a voxel too far. Farther than the band reads the band.

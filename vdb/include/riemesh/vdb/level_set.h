@@ -6,6 +6,7 @@
 #include <openvdb/openvdb.h>
 
 #include <cstddef>
+#include <vector>
 
 namespace riemesh::vdb {
 
@@ -28,5 +29,9 @@ struct SurfaceError {
 /// their distance to the mesh is read (trilinearly) from a signed distance grid of the closed mesh with
 /// the sdf's transform and a band of 16 voxels (larger distances read as 16 voxels).
 SurfaceError surfaceError(const Mesh& mesh, const openvdb::FloatGrid& sdf);
+/// The same for any closed triangle mesh given as arrays (world-space points, vertex indices), such
+/// as another mesher's output, so that every mesher is measured by the same code.
+SurfaceError surfaceError(const std::vector<openvdb::Vec3d>& worldPoints, const std::vector<openvdb::Vec3I>& triangles,
+                          const openvdb::FloatGrid& sdf);
 
 } // namespace riemesh::vdb
