@@ -1,12 +1,16 @@
 #include "riemesh/image.h"
 
 #include "detail/nano_stencil.h"
+#include "detail/nano_validate.h"
 
-#include <nanovdb/util/IO.h>
+#include <nanovdb/util/IO.h> // the file layout: nanovdb::io::Header and MetaData
 #include <nanovdb/util/SampleFromVoxels.h>
 
 #include <algorithm>
 #include <cmath>
+#include <cstring>
+#include <fstream>
+#include <iterator>
 #include <sstream>
 #include <stdexcept>
 
@@ -125,6 +129,8 @@ static double gershgorinBound(const nanovdb::Vec3fGrid* diag, const nanovdb::Vec
         for (uint32_t n = 0; n < tree.nodeCount(0); ++n, ++leaf) {
             for (uint32_t i = 0; i < 512; ++i) {
                 const nanovdb::Vec3f v = leaf->getValue(i);
+                if (!std::isfinite(v[0]) || !std::isfinite(v[1]) || !std::isfinite(v[2]))
+                    throw std::runtime_error("nvdb: the metric grids hold non-finite (NaN or infinite) values");
                 double m = sum ? 2.0 * std::max({std::abs(v[0]), std::abs(v[1]), std::abs(v[2])})
                                : std::max({double(v[0]), double(v[1]), double(v[2])});
                 out = std::max(out, m);
@@ -173,26 +179,78 @@ void NanoVolume::index()
 
 NanoVolume NanoVolume::read(const std::string& path)
 {
-    NanoVolume volume;
+    std::ifstream in(path, std::ios::binary);
+    if (!in) throw std::runtime_error("cannot read NanoVDB file '" + path + "': cannot open it");
+    const std::string bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+    if (in.bad()) throw std::runtime_error("cannot read NanoVDB file '" + path + "': read error");
     try {
-        volume.mHandles = nanovdb::io::readGrids<nanovdb::HostBuffer, std::vector>(path);
+        return fromBytes(reinterpret_cast<const std::uint8_t*>(bytes.data()), bytes.size());
     } catch (const std::exception& e) {
-        throw std::runtime_error("cannot read NanoVDB file '" + path + "': " + e.what());
+        throw std::runtime_error("NanoVDB file '" + path + "': " + e.what());
     }
-    if (volume.mHandles.empty()) throw std::runtime_error("NanoVDB file '" + path + "' holds no grid");
-    volume.index();
-    return volume;
 }
+
+namespace {
+
+/// The grids of a NanoVDB file image, parsed here rather than by nanovdb::io::readGrids: that
+/// trusts the file's name and grid sizes (allocating whatever they say, reading a name up to a
+/// NUL that may not be there). Here every size is checked against the bytes that remain before
+/// anything is allocated, and each grid's offsets before it is used (detail/nano_validate.h).
+/// Layout per segment: io::Header, gridCount x (io::MetaData, name), then the grids' bytes.
+std::vector<nanovdb::GridHandle<nanovdb::HostBuffer>> parseNanoFile(const std::uint8_t* data, std::size_t size)
+{
+    std::vector<nanovdb::GridHandle<nanovdb::HostBuffer>> handles;
+    std::size_t pos = 0;
+    auto take = [&](void* out, std::size_t n, const char* what) {
+        if (size - pos < n) throw std::runtime_error(std::string("truncated (") + what + ")");
+        std::memcpy(out, data + pos, n);
+        pos += n;
+    };
+    while (pos < size) {
+        nanovdb::io::Header header;
+        take(&header, sizeof(header), "segment header");
+        if (header.magic != NANOVDB_MAGIC_NUMBER) throw std::runtime_error("not a NanoVDB file (bad magic number)");
+        if (header.version.getMajor() != NANOVDB_MAJOR_VERSION_NUMBER)
+            throw std::runtime_error("NanoVDB version " + std::string(header.version.c_str()) + " is not supported");
+        if (header.codec != nanovdb::io::Codec::NONE)
+            throw std::runtime_error("compressed NanoVDB files are not supported (riemesh writes them uncompressed)");
+        if (header.gridCount == 0) throw std::runtime_error("a segment holds no grid");
+        std::vector<nanovdb::io::MetaData> metas(header.gridCount);
+        for (auto& meta : metas) {
+            take(&meta, sizeof(meta), "grid metadata");
+            if (meta.nameSize > size - pos) throw std::runtime_error("truncated (grid name)");
+            pos += meta.nameSize; // the name is read from the grid itself
+        }
+        for (const auto& meta : metas) {
+            if (meta.fileSize != meta.gridSize) throw std::runtime_error("grid size and stored size differ");
+            if (meta.gridSize > size - pos) throw std::runtime_error("truncated (grid data)");
+            auto buffer = nanovdb::HostBuffer::create(meta.gridSize);
+            std::memcpy(buffer.data(), data + pos, meta.gridSize);
+            pos += meta.gridSize;
+            const auto* bytes = static_cast<const std::uint8_t*>(buffer.data());
+            std::string problem = detail::nanoHeaderProblem(bytes, meta.gridSize);
+            if (problem.empty()) {
+                // Only the float and Vec3f grids are ever traversed; others are skipped by index().
+                const auto type = reinterpret_cast<const nanovdb::GridData*>(bytes)->mGridType;
+                if (type == nanovdb::GridType::Float) problem = detail::nanoTreeProblem<float>(bytes, meta.gridSize);
+                else if (type == nanovdb::GridType::Vec3f)
+                    problem = detail::nanoTreeProblem<nanovdb::Vec3f>(bytes, meta.gridSize);
+            }
+            if (!problem.empty())
+                throw std::runtime_error("corrupt grid " + std::to_string(handles.size()) + ": " + problem);
+            handles.emplace_back(std::move(buffer));
+        }
+    }
+    return handles;
+}
+
+} // namespace
 
 NanoVolume NanoVolume::fromBytes(const std::uint8_t* data, std::size_t size)
 {
     NanoVolume volume;
-    std::istringstream in(std::string(reinterpret_cast<const char*>(data), size), std::ios::binary);
-    try {
-        volume.mHandles = nanovdb::io::readGrids<nanovdb::HostBuffer, std::vector>(in);
-    } catch (const std::exception& e) {
-        throw std::runtime_error(std::string("cannot read NanoVDB data: ") + e.what());
-    }
+    if (size == 0) throw std::runtime_error("NanoVDB data is empty");
+    volume.mHandles = parseNanoFile(data, size);
     if (volume.mHandles.empty()) throw std::runtime_error("NanoVDB data holds no grid");
     volume.index();
     return volume;

@@ -1081,8 +1081,20 @@ MeshFormat meshFormatFromPath(const std::string& path)
 Mesh readMesh(const std::string& path)
 {
     const MeshFormat format = meshFormatFromPath(path);
+    std::string bytes;
     try {
-        const std::string bytes = readWholeFile(path);
+        bytes = readWholeFile(path);
+    } catch (const ParseError& e) {
+        throw std::runtime_error("cannot read mesh '" + path + "': " + e.what());
+    } catch (const std::bad_alloc&) {
+        throw std::runtime_error("cannot read mesh '" + path + "': out of memory");
+    }
+    return readMeshFromBytes(bytes, format, path);
+}
+
+Mesh readMeshFromBytes(std::string_view bytes, MeshFormat format, const std::string& path)
+{
+    try {
         if (bytes.empty()) throw ParseError("file is empty");
         MeshData data;
         switch (format) {

@@ -1,7 +1,10 @@
 // vdb2mesh / vdbphantom as a user meets them: every bad input of issue 3 gives exit 1, one error line
 // naming the problem, before any long work, and leaves an existing output file untouched.
 #include "riemesh/vdb/io.h"
+#include "riemesh/vdb/nano.h"
 #include "riemesh/vdb/phantom.h"
+
+#include <nifti2_io.h>
 
 #include <openvdb/io/File.h>
 
@@ -10,7 +13,11 @@
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include <cmath>
+#include <cstdint>
 #include <cstdlib>
+#include <cstring>
+#include <iterator>
 #include <filesystem>
 #include <fstream>
 #include <limits>
@@ -33,6 +40,32 @@ std::string slurp(const fs::path& p)
     std::stringstream s;
     s << in.rdbuf();
     return s.str();
+}
+
+/// A 3D NIfTI-1 float image of `n`^3 voxels (a bright ball), with a NaN at voxel `nanAt` if > 0.
+void writeNifti(const std::string& path, int n, float nanAt = 0)
+{
+    const int64_t dims[8] = {3, n, n, n, 1, 1, 1, 1};
+    nifti_image* nim = nifti_make_new_nim(dims, NIFTI_TYPE_FLOAT32, 1);
+    REQUIRE(nim);
+    auto* v = static_cast<float*>(nim->data);
+    for (int k = 0; k < n; ++k)
+        for (int j = 0; j < n; ++j)
+            for (int i = 0; i < n; ++i) {
+                const double r = std::hypot(i - n / 2.0, j - n / 2.0, k - n / 2.0);
+                v[(k * n + j) * n + i] = r < n / 3.0 ? 100.0f : 0.0f;
+            }
+    if (nanAt > 0) v[int(nanAt)] = std::numeric_limits<float>::quiet_NaN();
+    REQUIRE(nifti_set_filenames(nim, path.c_str(), 0, 1) == 0);
+    nifti_image_write(nim);
+    nifti_image_free(nim);
+}
+
+/// The first `keep` bytes of `from` (or half of it) into `to`.
+void truncateCopy(const std::string& from, const std::string& to, std::size_t keep = 0)
+{
+    const std::string bytes = slurp(from);
+    std::ofstream(to, std::ios::binary) << bytes.substr(0, keep ? keep : bytes.size() / 2);
 }
 
 /// The test folder, with the inputs every case needs.
@@ -68,6 +101,38 @@ struct Fixture {
         auto intensity = p.density->deepCopy();
         intensity->setGridClass(openvdb::GRID_UNKNOWN);
         writeVdb(path("intensity.vdb"), {intensity});
+
+        // NIfTI and NanoVDB: good, empty, truncated, text, NaN.
+        writeNifti(path("good.nii"), 16);
+        writeNifti(path("good.nii.gz"), 16);
+        writeNvdb(path("good.nvdb"), *p.density);
+        for (const char* ext : {".nii", ".nii.gz", ".nvdb"}) {
+            { std::ofstream(path(std::string("empty") + ext)); }
+            { std::ofstream(path(std::string("text") + ext)) << "not a volume at all\n"; }
+            truncateCopy(path(std::string("good") + ext), path(std::string("truncated") + ext));
+        }
+        truncateCopy(path("good.nii"), path("header-only.nii"), 352); // the header, no voxels
+        writeNifti(path("nan.nii"), 16, 100);
+        writeNvdb(path("nan.nvdb"), *nan);
+        // A NIfTI-2 header (64-bit dimensions) claiming 100000^3 float voxels, then a few bytes.
+        {
+            nifti_2_header h;
+            std::memset(&h, 0, sizeof(h));
+            h.sizeof_hdr = 540;
+            std::memcpy(h.magic, "n+2\0\r\n\032\n", 8);
+            h.datatype = NIFTI_TYPE_FLOAT32;
+            h.bitpix = 32;
+            const std::int64_t dim[8] = {3, 100000, 100000, 100000, 1, 1, 1, 1};
+            for (int i = 0; i < 8; ++i) h.dim[i] = dim[i], h.pixdim[i] = 1;
+            h.vox_offset = 544;
+            h.scl_slope = 1;
+            std::ofstream huge(path("huge.nii"), std::ios::binary);
+            huge.write(reinterpret_cast<const char*>(&h), sizeof(h));
+            huge << std::string(4 + 4096, '\0');
+        }
+        // A mesh as input, by its own extension and renamed .vdb.
+        { std::ofstream(path("mesh.obj")) << "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\nf 1 3 2\nf 1 2 4\nf 1 4 3\nf 2 3 4\n"; }
+        fs::copy_file(path("mesh.obj"), path("mesh.vdb"));
     }
     ~Fixture() { fs::remove_all(dir); }
     std::string path(const std::string& name) const { return (dir / name).string(); }
@@ -134,7 +199,41 @@ TEST_CASE("vdb2mesh: every bad input exits 1 with one line naming the problem an
         {good, "expected INPUT and OUTPUT"},
         {f.path("image.png") + " " + out, "unknown input extension"},
         {f.path("intensity.vdb") + " " + out, "give --iso"},
+        // Issue 6: the rest of the matrix.
+        {f.path("missing.nii.gz") + " " + out, "no such file"},
+        {f.path("missing.nvdb") + " " + out, "no such file"},
+        {f.path("empty.nii") + " " + out, "empty"},
+        {f.path("empty.nii.gz") + " " + out, "empty"},
+        {f.path("empty.nvdb") + " " + out, "empty"},
+        {f.path("truncated.nii") + " " + out, "truncated NIfTI file"},
+        {f.path("header-only.nii") + " " + out, "truncated NIfTI file"},
+        {f.path("truncated.nii.gz") + " " + out, "truncated NIfTI file"},
+        {f.path("truncated.nvdb") + " " + out, "truncated"},
+        {f.path("text.nii") + " " + out, "not a readable NIfTI file"},
+        {f.path("text.nii.gz") + " " + out, "not a readable NIfTI file"},
+        {f.path("text.nvdb") + " " + out, "not a NanoVDB file"},
+        {f.path("mesh.obj") + " " + out, "unknown input extension '.obj'"},
+        {f.path("mesh.vdb") + " " + out, "not a VDB file"},
+        {f.path("nan.nii") + " " + out + " --iso 50", "1 non-finite"},
+        {f.path("nan.nvdb") + " " + out, "3 non-finite"},
+        {f.path("huge.nii") + " " + out + " --iso 50", "100000x100000x100000 voxels needs about"},
+        {good + " " + out + " --max-memory 1M", "24x24x24 voxels needs about"},
+        {good + " " + out + " --max-memory banana", "--max-memory: 'banana' is not a number"},
+        {good + " " + out + " --max-memory 12", "--max-memory"},
+        {good + " " + out + " --mu-max 0", "--mu-max"},
+        {good + " " + out + " --threads -3", "--threads"},
+        {good + " " + out + " --max-iterations x", "--max-iterations: 'x' is not a number"},
+        {good + " " + out + " --max-vertices 2", "--max-vertices"},
+        {good + " " + out + " --delta", "--delta: missing value"},
+        {good + " " + out + " -x", "unknown option '-x'"},
+        {good + " " + f.path("out"), "unknown output extension ''"},
+        {good + " " + f.path("out.ply.gz"), "unknown output extension '.gz'"},
+        {good + " " + f.dir.string(), "unknown output extension"},
+        {good + " " + out + " --stats " + f.path("no/such/folder/s.json"), "does not exist"},
+        // Stops after the first iteration: the box is already past the cap (a limit, exit 1).
+        {good + " " + out + " --max-vertices 50", "vertex cap of 50 vertices"},
     };
+    MESSAGE(std::size(cases) << " bad-input cases");
     for (const auto& c : cases) {
         { std::ofstream(out) << "precious"; }
         const std::size_t before = f.fileCount();
@@ -150,13 +249,35 @@ TEST_CASE("vdb2mesh: every bad input exits 1 with one line naming the problem an
     }
 }
 
+TEST_CASE("vdb2mesh: a read-only output folder is refused up front (skipped as root)")
+{
+    Fixture f;
+    const fs::path ro = f.dir / "readonly";
+    fs::create_directories(ro);
+    { std::ofstream(ro / "out.ply") << "precious"; }
+    fs::permissions(ro, fs::perms::owner_read | fs::perms::owner_exec);
+    if (::geteuid() == 0) {
+        // Root writes anywhere: the folder's permissions cannot make the write fail.
+        MESSAGE("running as root: permissions do not bite, the read-only output case is skipped");
+    } else {
+        const Run r = f.run(RIEMESH_VDB2MESH_EXE, f.path("good.vdb") + " " + (ro / "out.ply").string());
+        INFO(r.err);
+        CHECK(r.code == 1);
+        CHECK(lineCount(r.err) == 1);
+        CHECK(r.err.find("is not writable") != std::string::npos);
+        CHECK(slurp(ro / "out.ply") == "precious");
+        CHECK(std::distance(fs::directory_iterator(ro), fs::directory_iterator()) == 1);
+    }
+    fs::permissions(ro, fs::perms::owner_all);
+}
+
 TEST_CASE("vdb2mesh: --help documents every flag with its default and unit, exit 0")
 {
     Fixture f;
     const Run r = f.run(RIEMESH_VDB2MESH_EXE, "--help");
     CHECK(r.code == 0);
     for (const char* flag : {"--grid", "--iso", "--metric", "--delta", "--zeta", "--mu-max", "--sigma", "--rho",
-                             "--max-iterations", "--init", "--export-nvdb", "--write-metric", "--stats", "--threads",
+                             "--max-iterations", "--max-vertices", "--max-memory", "--init", "--export-nvdb", "--write-metric", "--stats", "--threads",
                              "-q", "default", "voxels", "world units", "Exit codes"})
         CHECK_MESSAGE(r.out.find(flag) != std::string::npos, flag);
 }

@@ -6,6 +6,7 @@
 #include "riemesh/vdb/volume.h"
 
 #include "cli.h"
+#include "vdb2mesh_args.h"
 
 #include <atomic>
 #include <cctype>
@@ -30,185 +31,17 @@ namespace {
 
 namespace fs = std::filesystem;
 
-// Defaults (documented in --help).
-constexpr double kDelta = 3.0;      // voxels
-constexpr double kZeta = 2.5;
-constexpr double kMuMax = 9.0;
-constexpr double kSigma = 1.0;      // voxels
-constexpr double kRho = 2.0;        // voxels
-constexpr double kSmooth = 1.0;     // voxels
-constexpr int kMaxIterations = 3000;
-
 /// Bad input or parameters: exit 1.
 using riemesh::apps::BadInput;
 using riemesh::apps::parseCount;
 using riemesh::apps::parseNumber;
+using Args = riemesh::apps::Vdb2MeshArgs;
 
 volatile std::sig_atomic_t gInterrupted = 0;
 extern "C" void onSigint(int)
 {
     gInterrupted = 1;
     std::signal(SIGINT, SIG_DFL); // a second Ctrl-C kills at once
-}
-
-struct Args {
-    std::string input, output;
-    std::string grid;
-    std::optional<double> iso;
-    bool riemannian = true;
-    double delta = kDelta, zeta = kZeta, muMax = kMuMax, sigma = kSigma, rho = kRho, smooth = kSmooth;
-    int maxIterations = kMaxIterations;
-    std::string init = "box";
-    std::string exportNvdb, writeMetric, stats, reference;
-    int threads = 0;
-    bool quiet = false;
-    bool openBorders = false;
-    int downsample = 1;
-};
-
-void usage(std::FILE* out)
-{
-    std::fprintf(out,
-        "usage: vdb2mesh INPUT OUTPUT [options]\n"
-        "\n"
-        "Extracts the isosurface of a 3D image as a closed, oriented triangle mesh with the adaptive\n"
-        "deformable model of Taton & Lachaud (2003): the mesh deflates from the image box onto the object,\n"
-        "changes topology by itself, and samples the surface regularly in a Riemannian metric built from\n"
-        "the image structure tensor (fine at edges and corners, coarse on flat parts).\n"
-        "\n"
-        "INPUT   .vdb (a scalar float/double grid), .nvdb (written by --export-nvdb), .nii or .nii.gz\n"
-        "OUTPUT  .obj .ply (binary) .off .stl: the mesh, outward normals; .vdb: its level set \"surface\".\n"
-        "        World space: the grid's transform; for NIfTI, scanner space (RAS, millimetres).\n"
-        "\n"
-        "Image\n"
-        "  --grid NAME          grid to read from a .vdb (default: the first scalar grid)\n"
-        "  --iso V              isovalue, image intensity (default: 0.5 for fog volumes, 0 for level\n"
-        "                       sets; required for other images, e.g. --iso 40 for a T1 head MRI)\n"
-        "  --smooth S           Gaussian smoothing of the image the model fits, voxels (default %g; 0 = off)\n"
-        "  --downsample F       average F^3 voxel blocks first (integer, default 1 = off): a quick preview\n"
-        "  --open-borders       where the object touches the image box (a head cut at the neck), let the\n"
-        "                       surface follow the cut slice into the object; by default the object is\n"
-        "                       closed just beyond the border, its footprint's enclosed holes filled\n"
-        "Model\n"
-        "  --metric M           riemannian | euclidean (default riemannian)\n"
-        "  --delta D            shortest edge, metric length, voxels (default %g)\n"
-        "  --zeta Z             longest/shortest edge ratio, >= 2 (default %g)\n"
-        "  --mu-max M           largest metric eigenvalue, >= 1: resolution at contours x sqrt(M) (default %g)\n"
-        "  --sigma S            structure tensor pre-smoothing, voxels (default %g)\n"
-        "  --rho R              structure tensor window, voxels (default %g)\n"
-        "  --max-iterations N   iteration cap (default %d)\n"
-        "  --init I             box (default: the image box inset by a voxel, deflating)\n"
-        "                       sphere:X,Y,Z,R[;X,Y,Z,R...]  bubbles, world units, inflating\n"
-        "                       mesh:FILE  a closed mesh (.obj .ply .off .stl), world units\n"
-        "Outputs\n"
-        "  --export-nvdb FILE   the image the model fits and the metric as NanoVDB (web viewer input)\n"
-        "  --write-metric FILE  the metric grids metric_diag/metric_off to a .vdb (Houdini, vdb_view)\n"
-        "  --stats FILE         per-iteration log and final summary as JSON\n"
-        "  --reference FILE[:GRID]  report the distance to a reference signed distance grid (default\n"
-        "                       grid \"sdf\", as written by vdbphantom): mean and Hausdorff, voxels\n"
-        "Run\n"
-        "  --threads N          worker threads for the volume stages (default: all cores)\n"
-        "  -q, --quiet          no progress bar, no summary\n"
-        "  -h, --help           this text\n"
-        "\n"
-        "A progress bar goes to stderr when it is a terminal; a one-line summary to stdout.\n"
-        "Outputs are written to a temporary file beside the target and renamed: a failed or interrupted\n"
-        "run leaves no partial file and an existing file untouched.\n"
-        "Exit codes: 0 success, 1 bad input or parameters, 2 internal failure, 130 interrupted (Ctrl-C).\n",
-        kSmooth, kDelta, kZeta, kMuMax, kSigma, kRho, kMaxIterations);
-}
-
-Args parseArgs(int argc, char** argv)
-{
-    Args a;
-    std::vector<std::string> positional;
-    for (int i = 1; i < argc; ++i) {
-        const std::string f = argv[i];
-        auto value = [&]() -> std::string {
-            if (i + 1 >= argc) throw BadInput(f + ": missing value");
-            return argv[++i];
-        };
-        auto positive = [&](double& out) {
-            out = parseNumber(f, value());
-            if (!(out > 0)) throw BadInput(f + ": must be > 0 (got " + argv[i] + ")");
-        };
-        if (f == "-h" || f == "--help") { usage(stdout); std::exit(0); }
-        else if (f == "--grid") a.grid = value();
-        else if (f == "--iso") a.iso = parseNumber(f, value());
-        else if (f == "--metric") {
-            const std::string m = value();
-            if (m == "riemannian") a.riemannian = true;
-            else if (m == "euclidean") a.riemannian = false;
-            else throw BadInput("--metric: '" + m + "' is not riemannian or euclidean");
-        }
-        else if (f == "--delta") positive(a.delta);
-        else if (f == "--zeta") {
-            a.zeta = parseNumber(f, value());
-            if (!(a.zeta >= 2)) throw BadInput("--zeta: must be >= 2 so that both halves of a split edge stay >= delta (got " + std::string(argv[i]) + ")");
-        }
-        else if (f == "--mu-max") {
-            a.muMax = parseNumber(f, value());
-            if (!(a.muMax >= 1) || a.muMax > 10000) throw BadInput("--mu-max: must be in [1, 10000] (got " + std::string(argv[i]) + ")");
-        }
-        else if (f == "--sigma") positive(a.sigma);
-        else if (f == "--rho") positive(a.rho);
-        else if (f == "--smooth") {
-            a.smooth = parseNumber(f, value());
-            if (!(a.smooth >= 0)) throw BadInput("--smooth: must be >= 0");
-        }
-        else if (f == "--max-iterations") a.maxIterations = parseCount(f, value(), 1);
-        else if (f == "--init") a.init = value();
-        else if (f == "--export-nvdb") a.exportNvdb = value();
-        else if (f == "--write-metric") a.writeMetric = value();
-        else if (f == "--stats") a.stats = value();
-        else if (f == "--reference") a.reference = value();
-        else if (f == "--threads") a.threads = parseCount(f, value(), 1);
-        else if (f == "-q" || f == "--quiet") a.quiet = true;
-        else if (f == "--open-borders") a.openBorders = true;
-        else if (f == "--downsample") a.downsample = parseCount(f, value(), 1);
-        else if (f.size() > 1 && f[0] == '-') throw BadInput("unknown option '" + f + "' (see --help)");
-        else positional.push_back(f);
-    }
-    if (positional.size() != 2) throw BadInput("expected INPUT and OUTPUT (see --help)");
-    a.input = positional[0];
-    a.output = positional[1];
-    return a;
-}
-
-void checkOutputPath(const std::string& path, const std::vector<std::string>& extensions, const char* what)
-{
-    const std::string ext = riemesh::vdb::fileExtension(path);
-    bool ok = false;
-    std::string list;
-    for (const auto& e : extensions) {
-        ok |= (ext == e);
-        list += (list.empty() ? "" : " ") + e;
-    }
-    if (!ok)
-        throw BadInput("'" + path + "': unknown " + what + " extension '" + ext + "' (expected " + list + ")");
-    const fs::path p(path);
-    const fs::path dir = p.has_parent_path() ? p.parent_path() : fs::path(".");
-    std::error_code ec;
-    if (!fs::is_directory(dir, ec)) throw BadInput("'" + path + "': output folder '" + dir.string() + "' does not exist");
-    if (fs::is_directory(p, ec)) throw BadInput("'" + path + "': is a directory");
-}
-
-std::vector<std::pair<riemesh::Vec3, double>> parseSpheres(const std::string& spec)
-{
-    std::vector<std::pair<riemesh::Vec3, double>> spheres;
-    std::stringstream all(spec);
-    std::string one;
-    while (std::getline(all, one, ';')) {
-        std::stringstream parts(one);
-        std::string t;
-        std::vector<double> v;
-        while (std::getline(parts, t, ',')) v.push_back(parseNumber("--init sphere", t));
-        if (v.size() != 4) throw BadInput("--init sphere: '" + one + "' is not X,Y,Z,R");
-        if (!(v[3] > 0)) throw BadInput("--init sphere: radius must be > 0 in '" + one + "'");
-        spheres.push_back({riemesh::Vec3(v[0], v[1], v[2]), v[3]});
-    }
-    if (spheres.empty()) throw BadInput("--init sphere: no sphere given");
-    return spheres;
 }
 
 std::string jsonString(const std::string& s)
@@ -289,18 +122,22 @@ int main(int argc, char** argv)
     std::string referencePath, referenceGrid = "sdf";
     double readSeconds = 0;
     try {
-        args = parseArgs(argc, argv);
-        checkOutputPath(args.output, {".obj", ".ply", ".off", ".stl", ".vdb"}, "output");
-        if (!args.exportNvdb.empty()) checkOutputPath(args.exportNvdb, {".nvdb"}, "--export-nvdb");
+        args = apps::parseVdb2MeshArgs(argc, argv);
+        if (args.help) {
+            apps::printVdb2MeshUsage(stdout);
+            return 0;
+        }
+        apps::checkOutputPath(args.output, {".obj", ".ply", ".off", ".stl", ".vdb"}, "output");
+        if (!args.exportNvdb.empty()) apps::checkOutputPath(args.exportNvdb, {".nvdb"}, "--export-nvdb");
         if (!args.writeMetric.empty()) {
-            checkOutputPath(args.writeMetric, {".vdb"}, "--write-metric");
+            apps::checkOutputPath(args.writeMetric, {".vdb"}, "--write-metric");
             if (!args.riemannian) throw BadInput("--write-metric: there is no metric with --metric euclidean");
         }
-        if (!args.stats.empty()) checkOutputPath(args.stats, {".json"}, "--stats");
+        if (!args.stats.empty()) apps::checkOutputPath(args.stats, {".json"}, "--stats");
 
         if (args.init == "box") {
         } else if (args.init.rfind("sphere:", 0) == 0) {
-            spheres = parseSpheres(args.init.substr(7));
+            spheres = apps::parseSpheres(args.init.substr(7));
         } else if (args.init.rfind("mesh:", 0) == 0) {
             const std::string file = args.init.substr(5);
             try {
@@ -327,7 +164,7 @@ int main(int argc, char** argv)
 
         const auto readStart = std::chrono::steady_clock::now();
         try {
-            volume = vdb::Volume::read(args.input, args.grid);
+            volume = vdb::Volume::read(args.input, args.grid, args.maxMemory);
         } catch (const std::exception& e) {
             throw BadInput(e.what());
         }
@@ -405,6 +242,7 @@ int main(int argc, char** argv)
         opt.delta = args.delta * h;
         opt.zeta = args.zeta;
         opt.maxIterations = args.maxIterations;
+        opt.maxVertices = args.maxVertices;
         opt.forces.iso = iso;
         opt.forces.objectBrighter = objectBrighter;
         ProgressBar bar(tty, args.maxIterations);
@@ -421,6 +259,15 @@ int main(int argc, char** argv)
         const EvolutionStats evo = evolve(mesh, image, metric, opt);
         bar.finish();
         if (gInterrupted || evo.reason == StopReason::Interrupted) return interrupted();
+        if (evo.reason == StopReason::VertexCap) {
+            // A runaway mesh (delta too small for the image, or noise it keeps resolving): not a
+            // result worth writing. A limit the user set, so exit 1 like other parameters.
+            std::fprintf(stderr,
+                         "vdb2mesh: error: the mesh grew past the vertex cap of %llu vertices (--max-vertices) "
+                         "after %zu iterations; no output written (raise --delta or the cap)\n",
+                         static_cast<unsigned long long>(args.maxVertices), evo.iterations.size());
+            return 1;
+        }
 
         const auto writeStart = std::chrono::steady_clock::now();
         if (vdb::fileExtension(args.output) == ".vdb") {

@@ -21,7 +21,9 @@
 #include <cctype>
 #include <cmath>
 #include <filesystem>
+#include <limits>
 #include <mutex>
+#include <optional>
 #include <sstream>
 #include <stdexcept>
 
@@ -89,6 +91,39 @@ std::string describeVdbFailure(const std::string& raw)
     return "truncated or corrupt VDB file (" + what + ")";
 }
 
+std::string byteSize(double bytes)
+{
+    const char* units[] = {"bytes", "KB", "MB", "GB", "TB", "PB", "EB"};
+    int u = 0;
+    while (bytes >= 1024 && u < 6) bytes /= 1024, ++u;
+    std::ostringstream s;
+    s.precision(3);
+    s << bytes << " " << units[u];
+    return s.str();
+}
+
+/// The box of a grid from the statistics OpenVDB writes with it (file_bbox_min/max), if present.
+/// Voxels along each axis of [lo, hi], in 64 bits (a corrupt file may put any two ints there);
+/// nullopt for an empty box.
+std::optional<VoxelDims> boxDims(const openvdb::Vec3i& lo, const openvdb::Vec3i& hi)
+{
+    VoxelDims dims;
+    for (int a = 0; a < 3; ++a) {
+        dims[a] = std::int64_t(hi[a]) - std::int64_t(lo[a]) + 1;
+        if (dims[a] <= 0) return std::nullopt;
+    }
+    return dims;
+}
+
+/// The box of a grid from the statistics OpenVDB writes with it (file_bbox_min/max), if present.
+std::optional<VoxelDims> boxFromFileStats(const openvdb::GridBase& grid)
+{
+    const auto lo = grid.getMetadata<openvdb::Vec3IMetadata>(openvdb::GridBase::META_FILE_BBOX_MIN);
+    const auto hi = grid.getMetadata<openvdb::Vec3IMetadata>(openvdb::GridBase::META_FILE_BBOX_MAX);
+    if (!lo || !hi) return std::nullopt;
+    return boxDims(lo->value(), hi->value());
+}
+
 openvdb::FloatGrid::Ptr checkedImage(openvdb::FloatGrid::Ptr grid, const std::string& path)
 {
     const std::string name = grid->getName();
@@ -117,7 +152,19 @@ openvdb::FloatGrid::Ptr toFloatGrid(const openvdb::GridBase::Ptr& base)
 
 } // namespace
 
-openvdb::FloatGrid::Ptr readVdbImage(const std::string& path, const std::string& gridName)
+void checkMemoryBudget(const std::string& path, const VoxelDims& dims, std::uint64_t budgetBytes)
+{
+    if (budgetBytes == 0) return;
+    const double voxels = double(dims[0]) * double(dims[1]) * double(dims[2]);
+    const double needed = voxels * kPipelineBytesPerVoxel;
+    if (needed <= double(budgetBytes)) return;
+    throw fileError(path, "the image box of " + std::to_string(dims[0]) + "x" + std::to_string(dims[1]) + "x" +
+                              std::to_string(dims[2]) + " voxels needs about " + byteSize(needed) +
+                              " of memory, more than the budget of " + byteSize(double(budgetBytes)) +
+                              " (--max-memory)");
+}
+
+openvdb::FloatGrid::Ptr readVdbImage(const std::string& path, const std::string& gridName, std::uint64_t memoryBudget)
 {
     initialize();
     checkReadableFile(path);
@@ -145,6 +192,7 @@ openvdb::FloatGrid::Ptr readVdbImage(const std::string& path, const std::string&
     if (!(chosen->isType<openvdb::FloatGrid>() || chosen->isType<openvdb::DoubleGrid>()))
         throw fileError(path, "grid '" + chosen->getName() + "' holds " + chosen->valueType() +
                                   " values, not a scalar float or double grid");
+    if (const auto dims = boxFromFileStats(*chosen)) checkMemoryBudget(path, *dims, memoryBudget);
 
     openvdb::GridBase::Ptr base;
     try {
@@ -157,10 +205,13 @@ openvdb::FloatGrid::Ptr readVdbImage(const std::string& path, const std::string&
     auto grid = toFloatGrid(base);
     if (!grid->transform().isLinear())
         throw fileError(path, "grid '" + grid->getName() + "' has a non-linear (frustum) transform");
-    return checkedImage(grid, path);
+    checkedImage(grid, path);
+    const auto box = grid->evalActiveVoxelBoundingBox();
+    if (const auto dims = boxDims(box.min().asVec3i(), box.max().asVec3i())) checkMemoryBudget(path, *dims, memoryBudget);
+    return grid;
 }
 
-NanoFileGrids readNanoFile(const std::string& path, const std::string& gridName)
+NanoFileGrids readNanoFile(const std::string& path, const std::string& gridName, std::uint64_t memoryBudget)
 {
     initialize();
     checkReadableFile(path);
@@ -168,10 +219,14 @@ NanoFileGrids readNanoFile(const std::string& path, const std::string& gridName)
     try {
         volume = NanoVolume::read(path);
     } catch (const std::exception& e) {
-        throw fileError(path, e.what());
+        throw std::runtime_error(e.what()); // names the file already
     }
     if (!gridName.empty() && volume.imageName() != gridName)
         throw fileError(path, "no image grid named '" + gridName + "' (image grid: '" + volume.imageName() + "')");
+    const auto& bbox = volume.imageGrid()->indexBBox();
+    if (const auto dims = boxDims(openvdb::Vec3i(bbox.min()[0], bbox.min()[1], bbox.min()[2]),
+                                  openvdb::Vec3i(bbox.max()[0], bbox.max()[1], bbox.max()[2])))
+        checkMemoryBudget(path, *dims, memoryBudget);
     NanoFileGrids out;
     out.image = nanovdb::nanoToOpenVDB(*volume.imageGrid());
     out.image->setName(volume.imageName());

@@ -6,13 +6,19 @@
 
 #include <nifti2_io.h>
 
+#include <fcntl.h>
+#include <unistd.h>
+
 #include <algorithm>
 #include <cctype>
 #include <cmath>
 #include <cstdint>
+#include <cstdio>
+#include <cstring>
 #include <filesystem>
 #include <memory>
 #include <stdexcept>
+#include <vector>
 
 namespace riemesh::vdb {
 
@@ -26,6 +32,69 @@ bool isNiftiPath(const std::string& path)
 
 namespace {
 
+/// Silences stderr (fd 2) while it lives: nifticlib prints its own "** ERROR" lines whatever the
+/// debug level, and a bad file must give the user one line, ours. Only the reading thread runs then.
+class QuietStderr {
+public:
+    QuietStderr()
+    {
+        std::fflush(stderr);
+        mSaved = ::dup(STDERR_FILENO);
+        const int null = ::open("/dev/null", O_WRONLY);
+        if (mSaved >= 0 && null >= 0) ::dup2(null, STDERR_FILENO);
+        if (null >= 0) ::close(null);
+    }
+    ~QuietStderr()
+    {
+        std::fflush(stderr);
+        if (mSaved >= 0) {
+            ::dup2(mSaved, STDERR_FILENO);
+            ::close(mSaved);
+        }
+    }
+    QuietStderr(const QuietStderr&) = delete;
+    QuietStderr& operator=(const QuietStderr&) = delete;
+private:
+    int mSaved = -1;
+};
+
+/// Non-finite values among the float voxels as stored in the file. nifticlib's loader silently
+/// replaces them by 0, which would mesh a hole as background; we refuse the file instead.
+std::uint64_t countNonFiniteStored(const nifti_image& nim)
+{
+    if (nim.datatype != NIFTI_TYPE_FLOAT32 && nim.datatype != NIFTI_TYPE_FLOAT64) return 0;
+    znzFile fp = znzopen(nim.iname, "rb", nifti_is_gzfile(nim.iname));
+    if (znz_isnull(fp)) return 0; // the load that follows reports the problem
+    std::uint64_t bad = 0;
+    if (znzseek(fp, long(nim.iname_offset), SEEK_SET) == 0) {
+        const bool swap = nim.byteorder != nifti_short_order();
+        std::vector<unsigned char> chunk(std::size_t(1) << 20);
+        std::uint64_t left = std::uint64_t(nim.nvox) * std::uint64_t(nim.nbyper);
+        while (left > 0) {
+            const std::size_t want = std::size_t(std::min<std::uint64_t>(left, chunk.size()));
+            const std::size_t got = znzread(chunk.data(), 1, want, fp);
+            const std::size_t n = got / std::size_t(nim.nbyper);
+            for (std::size_t i = 0; i < n; ++i) {
+                unsigned char* v = chunk.data() + i * std::size_t(nim.nbyper);
+                if (swap) std::reverse(v, v + nim.nbyper);
+                if (nim.nbyper == 4) {
+                    float f;
+                    std::memcpy(&f, v, 4);
+                    bad += !std::isfinite(f);
+                } else {
+                    double d;
+                    std::memcpy(&d, v, 8);
+                    bad += !std::isfinite(d);
+                }
+            }
+            if (got < want) break; // short file: the load reports it
+            left -= got;
+        }
+    }
+    znzclose(fp);
+    return bad;
+}
+
 template<typename T>
 void convert(const void* raw, std::size_t n, double slope, double inter, std::vector<float>& out)
 {
@@ -35,7 +104,7 @@ void convert(const void* raw, std::size_t n, double slope, double inter, std::ve
 
 } // namespace
 
-openvdb::FloatGrid::Ptr readNifti(const std::string& path, NiftiHeaderInfo* info)
+openvdb::FloatGrid::Ptr readNifti(const std::string& path, NiftiHeaderInfo* info, std::uint64_t memoryBudget)
 {
     initialize();
     auto fail = [&](const std::string& what) { return std::runtime_error("'" + path + "': " + what); };
@@ -44,13 +113,25 @@ openvdb::FloatGrid::Ptr readNifti(const std::string& path, NiftiHeaderInfo* info
     if (std::filesystem::file_size(path, ec) == 0 || ec) throw fail("file is empty");
 
     nifti_set_debug_level(0);
-    std::unique_ptr<nifti_image, void (*)(nifti_image*)> nim(nifti_image_read(path.c_str(), /*read_data=*/0),
-                                                             nifti_image_free);
+    std::unique_ptr<nifti_image, void (*)(nifti_image*)> nim(nullptr, nifti_image_free);
+    {
+        QuietStderr quiet;
+        nim.reset(nifti_image_read(path.c_str(), /*read_data=*/0));
+    }
     if (!nim) throw fail("not a readable NIfTI file (bad or missing header)");
     if (nim->nx < 2 || nim->ny < 2 || nim->nz < 2) throw fail("NIfTI image is not 3D (need at least 2 voxels along i, j and k)");
-    const std::int64_t volumes = nim->nvox / (nim->nx * nim->ny * nim->nz);
-    if (volumes != 1)
+    // Everything the header claims is checked before a voxel is read: nifti_image_load allocates
+    // what the header says, so a lying or merely huge header must stop here, not in an OOM kill.
+    checkMemoryBudget(path, {nim->nx, nim->ny, nim->nz}, memoryBudget);
+    constexpr std::int64_t kMaxAxis = std::int64_t(1) << 30; // OpenVDB coordinates are 32-bit
+    if (nim->nx > kMaxAxis || nim->ny > kMaxAxis || nim->nz > kMaxAxis)
+        throw fail("NIfTI image of " + std::to_string(nim->nx) + "x" + std::to_string(nim->ny) + "x" +
+                   std::to_string(nim->nz) + " voxels is too large");
+    const unsigned __int128 boxVoxels = (unsigned __int128)nim->nx * nim->ny * nim->nz;
+    if (nim->nvox <= 0 || (unsigned __int128)nim->nvox != boxVoxels) {
+        const double volumes = double(nim->nvox) / (double(nim->nx) * double(nim->ny) * double(nim->nz));
         throw fail("NIfTI file holds " + std::to_string(volumes) + " volumes; expected a single 3D volume");
+    }
     switch (nim->datatype) {
     case NIFTI_TYPE_UINT8: case NIFTI_TYPE_INT8: case NIFTI_TYPE_INT16: case NIFTI_TYPE_UINT16:
     case NIFTI_TYPE_INT32: case NIFTI_TYPE_UINT32: case NIFTI_TYPE_INT64: case NIFTI_TYPE_UINT64:
@@ -59,7 +140,24 @@ openvdb::FloatGrid::Ptr readNifti(const std::string& path, NiftiHeaderInfo* info
         throw fail(std::string("unsupported NIfTI datatype ") + nifti_datatype_string(nim->datatype) +
                    " (need an integer or float scalar type)");
     }
-    if (nifti_image_load(nim.get()) != 0 || !nim->data) throw fail("truncated NIfTI file (cannot read the voxel data)");
+    if (!nifti_is_gzfile(nim->iname)) {
+        // Uncompressed: the file must hold the bytes the header declares (a gzip stream's length
+        // is only known by decompressing it; nifticlib then reports a short read).
+        const std::uint64_t declared = std::uint64_t(nim->nvox) * std::uint64_t(nim->nbyper);
+        const std::uintmax_t size = std::filesystem::file_size(nim->iname, ec);
+        if (ec || nim->iname_offset < 0 || size < std::uint64_t(nim->iname_offset) ||
+            size - std::uint64_t(nim->iname_offset) < declared)
+            throw fail("truncated NIfTI file (the header declares " + std::to_string(declared) +
+                       " bytes of voxel data, the file holds " + std::to_string(size) + " bytes in all)");
+    }
+    if (const auto bad = countNonFiniteStored(*nim))
+        throw fail("NIfTI image has " + std::to_string(bad) + " non-finite (NaN or infinite) voxel values");
+    int loaded;
+    {
+        QuietStderr quiet;
+        loaded = nifti_image_load(nim.get());
+    }
+    if (loaded != 0 || !nim->data) throw fail("truncated NIfTI file (cannot read the voxel data)");
 
     const double slope = (nim->scl_slope != 0 && std::isfinite(nim->scl_slope)) ? nim->scl_slope : 1.0;
     const double inter = (nim->scl_slope != 0 && std::isfinite(nim->scl_inter)) ? nim->scl_inter : 0.0;

@@ -100,19 +100,27 @@ void describe(ImageInfo& info, const openvdb::FloatGrid& grid)
 
 } // namespace
 
-Volume Volume::read(const std::string& path, const std::string& gridName)
+std::uint64_t defaultMemoryBudget()
 {
+    const long pages = ::sysconf(_SC_PHYS_PAGES), pageSize = ::sysconf(_SC_PAGE_SIZE);
+    if (pages <= 0 || pageSize <= 0) return std::uint64_t(4) << 30; // unknown: 4 GB
+    return std::uint64_t(pages) * std::uint64_t(pageSize) / 2;
+}
+
+Volume Volume::read(const std::string& path, const std::string& gridName, std::uint64_t memoryBudget)
+{
+    if (memoryBudget == 0) memoryBudget = defaultMemoryBudget();
     Volume v;
     auto& I = *v.mImpl;
     I.info.path = path;
     const std::string ext = fileExtension(path);
     if (ext == ".vdb") {
         I.info.format = "vdb";
-        I.image = readVdbImage(path, gridName);
+        I.image = readVdbImage(path, gridName, memoryBudget);
         I.info.transformNote = "grid transform";
     } else if (ext == ".nvdb") {
         I.info.format = "nvdb";
-        auto grids = readNanoFile(path, gridName);
+        auto grids = readNanoFile(path, gridName, memoryBudget);
         I.image = grids.image;
         I.diag = grids.metricDiag;
         I.off = grids.metricOff;
@@ -122,7 +130,7 @@ Volume Volume::read(const std::string& path, const std::string& gridName)
         I.info.format = "nifti";
         if (!gridName.empty()) throw std::runtime_error("'" + path + "': --grid does not apply to NIfTI files");
         NiftiHeaderInfo h;
-        I.image = readNifti(path, &h);
+        I.image = readNifti(path, &h, memoryBudget);
         I.info.transformNote = "NIfTI scanner space (RAS, mm) from the " + h.transformSource;
     } else {
         throw std::runtime_error("'" + path + "': unknown input extension '" + ext +

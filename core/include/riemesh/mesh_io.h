@@ -6,6 +6,7 @@
 #include "riemesh/mesh.h"
 
 #include <string>
+#include <string_view>
 
 namespace riemesh {
 
@@ -19,6 +20,10 @@ MeshFormat meshFormatFromPath(const std::string& path);
 /// std::runtime_error naming the file and the problem (missing, empty, truncated, malformed,
 /// non-finite coordinates, out-of-range indices, not a closed manifold).
 Mesh readMesh(const std::string& path);
+
+/// The same from a file's bytes in memory (the browser's dropped files, the fuzzer); `name` stands
+/// for the file in messages.
+Mesh readMeshFromBytes(std::string_view bytes, MeshFormat format, const std::string& name);
 
 /// Writes `mesh` in `format` (default: from the extension) atomically. `comment` goes in the file's
 /// header where the format has one. Throws std::runtime_error on failure (nothing is left behind).

@@ -8,6 +8,7 @@
 
 #include <openvdb/openvdb.h>
 
+#include <array>
 #include <cstdint>
 #include <string>
 
@@ -22,10 +23,24 @@ std::string gridClassName(const openvdb::GridBase& grid);
 /// Number of NaN or infinite values among the active voxels and tiles (tiles count once).
 std::uint64_t countNonFinite(const openvdb::FloatGrid& grid);
 
+/// Bytes the converter needs per voxel of an image's active bounding box at its peak (the structure
+/// tensor and metric stages work on that box as a dense block). Measured as vdb2mesh's peak resident
+/// memory over box voxels: cube-cavity phantoms 64^3 / 128^3 / 192^3: 265 / 100 / 66 bytes (a fixed
+/// ~45 MB dominates small boxes); the Colin27 head MRI (181x217x181): 109 bytes. Rounded up.
+inline constexpr double kPipelineBytesPerVoxel = 128;
+
+/// Throws std::runtime_error naming `path`, the box and both sizes when an image box of
+/// `dims` voxels would need more than `budgetBytes` (kPipelineBytesPerVoxel each); 0 = no limit.
+using VoxelDims = std::array<std::int64_t, 3>;
+void checkMemoryBudget(const std::string& path, const VoxelDims& dims, std::uint64_t budgetBytes);
+
 /// Reads the scalar grid named `gridName` (default: the first float or double grid) from a .vdb file,
 /// as a FloatGrid. Checks: the file exists, is non-empty, is a complete VDB file, the grid exists and
-/// is a scalar float/double grid, has active voxels, and all its active values are finite.
-openvdb::FloatGrid::Ptr readVdbImage(const std::string& path, const std::string& gridName = {});
+/// is a scalar float/double grid, has active voxels, and all its active values are finite. With a
+/// `memoryBudget` (bytes, 0 = none), a grid whose bounding box exceeds it is refused from the file's
+/// statistics before its voxels are read (and from its real box after, for files without them).
+openvdb::FloatGrid::Ptr readVdbImage(const std::string& path, const std::string& gridName = {},
+                                     std::uint64_t memoryBudget = 0);
 
 /// Grids of a riemesh .nvdb file (the image and, when present, the metric) converted back to OpenVDB.
 struct NanoFileGrids {
@@ -34,7 +49,8 @@ struct NanoFileGrids {
     double muMax = 1.0;                            ///< bound on the metric's eigenvalues
 };
 /// Reads a .nvdb file through riemesh::NanoVolume; `gridName` must match the image grid when given.
-NanoFileGrids readNanoFile(const std::string& path, const std::string& gridName = {});
+/// `memoryBudget` as for readVdbImage (checked on the image's box before conversion).
+NanoFileGrids readNanoFile(const std::string& path, const std::string& gridName = {}, std::uint64_t memoryBudget = 0);
 
 /// Reads any supported image by extension: .vdb, .nvdb, .nii, .nii.gz.
 openvdb::FloatGrid::Ptr readImage(const std::string& path, const std::string& gridName = {});

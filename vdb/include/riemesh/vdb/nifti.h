@@ -26,7 +26,10 @@ struct NiftiHeaderInfo {
 /// applies scl_slope/scl_inter (when slope != 0), and returns a FloatGrid whose voxels are all active
 /// over the image box, named after the file, class "unknown" (an intensity image: give --iso), with an
 /// affine transform from voxel index to scanner space. Throws std::runtime_error naming the problem.
-openvdb::FloatGrid::Ptr readNifti(const std::string& path, NiftiHeaderInfo* info = nullptr);
+/// The header is checked before any voxel is read: an uncompressed file must hold the voxel bytes it
+/// declares, and with a `memoryBudget` (bytes, 0 = none) a box that exceeds it is refused.
+openvdb::FloatGrid::Ptr readNifti(const std::string& path, NiftiHeaderInfo* info = nullptr,
+                                  std::uint64_t memoryBudget = 0);
 
 /// True for .nii and .nii.gz (case-insensitive).
 bool isNiftiPath(const std::string& path);

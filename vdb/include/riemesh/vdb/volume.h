@@ -45,7 +45,9 @@ class Volume {
 public:
     /// Reads .vdb (grid `gridName` or the first scalar grid), .nvdb (riemesh files, with their metric
     /// if any) or .nii/.nii.gz. Throws std::runtime_error with a one-line message naming the problem.
-    static Volume read(const std::string& path, const std::string& gridName = {});
+    /// An image whose bounding box needs more than `memoryBudget` bytes (0: defaultMemoryBudget())
+    /// is refused, before its voxels are read where the file's header tells its size.
+    static Volume read(const std::string& path, const std::string& gridName = {}, std::uint64_t memoryBudget = 0);
 
     Volume();
     ~Volume();
@@ -105,6 +107,9 @@ ReferenceError compareToReference(const Mesh& mesh, const std::string& path, con
 void writePhantom(const std::string& shape, const std::string& path, int size, double noise, std::uint64_t seed);
 /// The valid phantom shape names.
 std::vector<std::string> phantomShapes();
+
+/// Half the physical memory, in bytes (the default budget of Volume::read).
+std::uint64_t defaultMemoryBudget();
 
 /// Limits TBB to `threads` threads for the lifetime of the returned object (0: all cores).
 std::shared_ptr<void> limitThreads(int threads);

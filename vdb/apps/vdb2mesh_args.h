@@ -1,0 +1,60 @@
+// vdb/apps/vdb2mesh_args.h: vdb2mesh's command line, parsed and checked without running anything, so
+// that tests and the fuzzer (fuzz/vdb2mesh_args_fuzz.cpp) reach it directly. Every problem is a
+// BadInput (exit 1) naming the flag; nothing here reads the input image.
+#pragma once
+
+#include "riemesh/mesh.h"
+
+#include <cstdint>
+#include <cstdio>
+#include <optional>
+#include <string>
+#include <utility>
+#include <vector>
+
+namespace riemesh::apps {
+
+// Defaults (documented in --help).
+inline constexpr double kDelta = 3.0;      // voxels
+inline constexpr double kZeta = 2.5;
+inline constexpr double kMuMax = 9.0;
+inline constexpr double kSigma = 1.0;      // voxels
+inline constexpr double kRho = 2.0;        // voxels
+inline constexpr double kSmooth = 1.0;     // voxels
+inline constexpr int kMaxIterations = 3000;
+inline constexpr std::uint64_t kMaxVertices = 4'000'000;
+
+struct Vdb2MeshArgs {
+    bool help = false;                 ///< -h/--help: print usage, nothing else
+    std::string input, output;
+    std::string grid;
+    std::optional<double> iso;
+    bool riemannian = true;
+    double delta = kDelta, zeta = kZeta, muMax = kMuMax, sigma = kSigma, rho = kRho, smooth = kSmooth;
+    int maxIterations = kMaxIterations;
+    std::uint64_t maxVertices = kMaxVertices;
+    std::uint64_t maxMemory = 0;       ///< bytes; 0 = the default budget (half the physical memory)
+    std::string init = "box";
+    std::string exportNvdb, writeMetric, stats, reference;
+    int threads = 0;
+    bool quiet = false;
+    bool openBorders = false;          ///< --open-borders: do not close objects cut by the image box
+    int downsample = 1;                ///< --downsample F: block-average F^3 voxels first
+};
+
+/// argv[1..argc-1] as flags and the two positionals; the values' ranges are checked here.
+Vdb2MeshArgs parseVdb2MeshArgs(int argc, const char* const* argv);
+
+/// The --help text.
+void printVdb2MeshUsage(std::FILE* out);
+
+/// "sphere:" specs X,Y,Z,R[;X,Y,Z,R...] (world units), each radius > 0.
+std::vector<std::pair<Vec3, double>> parseSpheres(const std::string& spec);
+
+/// A byte count with an optional K/M/G/T suffix (powers of 1024), e.g. "512M", "1.5G", "1000000".
+std::uint64_t parseByteCount(const std::string& flag, const std::string& text);
+
+/// The output file's extension is one of `extensions`, its folder exists and it is not a folder.
+void checkOutputPath(const std::string& path, const std::vector<std::string>& extensions, const char* what);
+
+} // namespace riemesh::apps
