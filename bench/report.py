@@ -632,18 +632,28 @@ class Report:
                 if parsed:
                     row["voxels"] = parsed[0]["voxels"]
                     row["t%d" % t] = parsed[0]["seconds"]
+                    row["cpu%d" % t] = parsed[0]["cpu_seconds"]
                 else:
                     row["status"] = why
             if "t1" in row and "t2" in row:
                 row["speedup"] = row["t1"] / row["t2"]
+                row["cores2"] = row["cpu2"] / row["t2"]  # cores the 2-thread run actually got
                 row["ns_per_voxel"] = 1e9 * row["t1"] / row["voxels"]
             rows.append(row)
-        b.write_csv("metric_cost.csv", rows, ["size", "voxels", "t1", "t2", "speedup", "ns_per_voxel", "status"])
+        b.write_csv("metric_cost.csv", rows, ["size", "voxels", "t1", "cpu1", "t2", "cpu2", "speedup", "cores2",
+                                               "ns_per_voxel", "status"])
         self.md.append(table([
             ("image", lambda x: "%d^3" % x["size"]), ("voxels", lambda x: fmt(x.get("voxels"))),
             ("1 thread (s)", lambda x: fmt(x.get("t1"))), ("2 threads (s)", lambda x: fmt(x.get("t2"))),
-            ("speed-up", lambda x: fmt(x.get("speedup"))), ("ns/voxel (1 thread)", lambda x: fmt(x.get("ns_per_voxel"))),
+            ("speed-up", lambda x: fmt(x.get("speedup"))),
+            ("cores used by 2 threads (CPU s / s)", lambda x: fmt(x.get("cores2"))),
+            ("ns/voxel (1 thread)", lambda x: fmt(x.get("ns_per_voxel"))),
             ("status", lambda x: x.get("status", "ok"))], rows))
+        starved = [x for x in rows if "cores2" in x and x["cores2"] < 1.5]
+        if starved:
+            self.md.append("\nIn this run the 2-thread runs got %s cores on average (processor seconds per second): "
+                           "the machine was busy, so the speed-up says little about the code.\n" % fmt(
+                               sum(x["cores2"] for x in starved) / len(starved)))
         data = {"metric.dat": "".join("%d %s %s\n" % (x["voxels"], x["t1"], x["t2"]) for x in rows if "speedup" in x)}
         if data["metric.dat"]:
             b.plot("metric_cost.png", 'set logscale xy\nset xlabel "voxels"\nset ylabel "seconds"\nset key top left\n'

@@ -30,6 +30,7 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <ctime>
 #include <fstream>
 #include <numeric>
 #include <optional>
@@ -441,15 +442,23 @@ int runMesh(const Args& a, const openvdb::FloatGrid::Ptr& image)
 int runMetric(const Args& a, const openvdb::FloatGrid::Ptr& image)
 {
     const openvdb::Coord dim = image->evalActiveVoxelDim();
-    double best = INFINITY;
+    // Processor time beside wall time: on a shared machine a run that gets less than its threads'
+    // worth of cores shows it (cpu < threads x wall), and a speed-up from it means little.
+    double best = INFINITY, bestCpu = 0;
     for (int r = 0; r < a.repeat; ++r) {
         const auto t0 = Clock::now();
+        const std::clock_t c0 = std::clock();
         const vdb::MetricGrids m = vdb::computeMetric(*image);
-        best = std::min(best, secondsSince(t0));
+        const double wall = secondsSince(t0), cpu = double(std::clock() - c0) / CLOCKS_PER_SEC;
+        if (wall < best) {
+            best = wall;
+            bestCpu = cpu;
+        }
         if (m.totalVoxels == 0) throw std::runtime_error("metric: empty image");
     }
-    std::printf("image,voxels,dims,threads,seconds\n%s,%lld,%dx%dx%d,%d,%.4f\n", csvField(a.label).c_str(),
-                static_cast<long long>(dim.x()) * dim.y() * dim.z(), dim.x(), dim.y(), dim.z(), a.threads, best);
+    std::printf("image,voxels,dims,threads,seconds,cpu_seconds\n%s,%lld,%dx%dx%d,%d,%.4f,%.4f\n",
+                csvField(a.label).c_str(), static_cast<long long>(dim.x()) * dim.y() * dim.z(), dim.x(), dim.y(),
+                dim.z(), a.threads, best, bestCpu);
     return 0;
 }
 
