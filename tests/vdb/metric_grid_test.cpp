@@ -188,3 +188,25 @@ TEST_CASE("gaussianSmooth: keeps constants and the transform, and reduces noise 
             for (int i = 5; i < 35; ++i, ++n) sum2 += double(acc.getValue(Coord(i, j, k))) * acc.getValue(Coord(i, j, k));
     CHECK(std::sqrt(sum2 / n) == doctest::Approx(0.150).epsilon(0.08));
 }
+
+TEST_CASE("metric: the edge gain refines across a cube's edges and leaves its faces coarse")
+{
+    const int n = 40;
+    const openvdb::Vec3d c(19.5);
+    auto cube = denseImage(n, [&](const openvdb::Vec3d& p) {
+        return smoothStep(std::max({std::abs(p.x() - c.x()), std::abs(p.y() - c.y()), std::abs(p.z() - c.z())}) - 10.0);
+    });
+    const Coord edge(30, 30, 20), face(30, 20, 20); // on the x = y edge mid-way; a face centre
+    auto tangential = [&](double gain, const Coord& at) {
+        MetricOptions o;
+        o.tangentialGain = gain;
+        Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> es(metricAt(computeMetric(*cube, {1.0, 2.0}, o), at));
+        return es.eigenvalues()[1]; // the middle eigenvalue: across the edge, tangent to both faces
+    };
+    const double plain = tangential(1.0, edge), boosted = tangential(4.0, edge);
+    MESSAGE("mu across the edge: gain 1 -> " << plain << ", gain 4 -> " << boosted);
+    CHECK(boosted > 3.0);            // edges across it ~2x shorter than on a face (muMax 9)
+    CHECK(boosted > 2.0 * plain);
+    CHECK(tangential(4.0, face) < 1.5); // flat face: tangential directions stay ~Euclidean
+    CHECK_THROWS(tangential(0.5, edge));
+}

@@ -220,6 +220,7 @@ int main(int argc, char** argv)
             m.sigma = args.sigma;
             m.rho = args.rho;
             m.muMax = args.muMax;
+            m.tangentialGain = args.tangentialGain;
             metricStats = volume.computeMetric(m);
         }
         volume.smooth(args.smooth);
@@ -294,7 +295,7 @@ int main(int argc, char** argv)
               << "], \"voxel_size\": " << h << ", \"world_space\": " << jsonString(info.transformNote) << "},\n"
               << "  \"parameters\": {\"metric\": \"" << (args.riemannian ? "riemannian" : "euclidean")
               << "\", \"iso\": " << iso << ", \"delta_voxels\": " << args.delta << ", \"zeta\": " << args.zeta
-              << ", \"mu_max\": " << args.muMax << ", \"sigma_voxels\": " << args.sigma << ", \"rho_voxels\": "
+              << ", \"mu_max\": " << args.muMax << ", \"edge_gain\": " << args.tangentialGain << ", \"sigma_voxels\": " << args.sigma << ", \"rho_voxels\": "
               << args.rho << ", \"smooth_voxels\": " << args.smooth << ", \"max_iterations\": " << args.maxIterations
               << ", \"init\": " << jsonString(args.init) << ", \"open_borders\": " << (args.openBorders ? "true" : "false")
               << ", \"border_voxels_added\": " << borderVoxels << ", \"downsample\": " << args.downsample << "},\n";

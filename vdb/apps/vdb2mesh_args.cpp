@@ -45,6 +45,8 @@ void printVdb2MeshUsage(std::FILE* out)
         "  --mu-max M           largest metric eigenvalue, >= 1: resolution at contours x sqrt(M) (default %g)\n"
         "  --sigma S            structure tensor pre-smoothing, voxels (default %g)\n"
         "  --rho R              structure tensor window, voxels (default %g)\n"
+        "  --edge-gain G        boost of the metric along edges and corners of the image, >= 1: 1 = the\n"
+        "                       structure tensor as is; higher refines creases more (default %g)\n"
         "  --max-iterations N   iteration cap (default %d)\n"
         "  --max-vertices N     vertex cap: a mesh growing past N vertices stops the run with an error\n"
         "                       and no output (default %llu)\n"
@@ -70,7 +72,7 @@ void printVdb2MeshUsage(std::FILE* out)
         "run leaves no partial file and an existing file untouched.\n"
         "Exit codes: 0 success, 1 bad input or parameters (or a limit reached), 2 internal failure,\n"
         "130 interrupted (Ctrl-C).\n",
-        kSmooth, kDelta, kZeta, kMuMax, kSigma, kRho, kMaxIterations, static_cast<unsigned long long>(kMaxVertices));
+        kSmooth, kDelta, kZeta, kMuMax, kSigma, kRho, kTangentialGain, kMaxIterations, static_cast<unsigned long long>(kMaxVertices));
 }
 
 namespace {
@@ -145,6 +147,11 @@ Vdb2MeshArgs parseVdb2MeshArgs(int argc, const char* const* argv)
         }
         else if (f == "--sigma") positive(a.sigma);
         else if (f == "--rho") positive(a.rho);
+        else if (f == "--edge-gain") {
+            a.tangentialGain = parseNumber(f, value());
+            if (!(a.tangentialGain >= 1) || a.tangentialGain > 1000)
+                throw BadInput("--edge-gain: must be in [1, 1000] (got " + std::string(argv[i]) + ")");
+        }
         else if (f == "--smooth") {
             a.smooth = parseNumber(f, value());
             if (!(a.smooth >= 0)) throw BadInput("--smooth: must be >= 0");

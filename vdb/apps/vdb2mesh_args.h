@@ -20,6 +20,7 @@ inline constexpr double kZeta = 2.5;
 inline constexpr double kMuMax = 9.0;
 inline constexpr double kSigma = 1.0;      // voxels
 inline constexpr double kRho = 2.0;        // voxels
+inline constexpr double kTangentialGain = 4.0;
 inline constexpr double kSmooth = 1.0;     // voxels
 inline constexpr int kMaxIterations = 3000;
 inline constexpr std::uint64_t kMaxVertices = 4'000'000;
@@ -40,6 +41,7 @@ struct Vdb2MeshArgs {
     bool quiet = false;
     bool openBorders = false;          ///< --open-borders: do not close objects cut by the image box
     int downsample = 1;                ///< --downsample F: block-average F^3 voxels first
+    double tangentialGain = kTangentialGain; ///< --edge-gain: boost of the metric at edges and corners
 };
 
 /// argv[1..argc-1] as flags and the two positionals; the values' ranges are checked here.

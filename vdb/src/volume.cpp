@@ -254,6 +254,7 @@ VolumeMetricStats Volume::computeMetric(const VolumeMetricOptions& options)
     t.rho = options.rho;
     MetricOptions m;
     m.muMax = options.muMax;
+    m.tangentialGain = options.tangentialGain;
     auto grids = riemesh::vdb::computeMetric(*mImpl->image, t, m);
     mImpl->diag = grids.diag;
     mImpl->off = grids.off;

@@ -34,6 +34,7 @@ struct VolumeMetricOptions {
     double sigma = 1.0;         ///< structure tensor pre-smoothing (voxels)
     double rho = 2.0;           ///< structure tensor window (voxels)
     double muMax = 9.0;         ///< largest metric eigenvalue
+    double tangentialGain = 4.0;///< boost of the edge/corner eigenvalues (metric_grid.h)
 };
 
 struct VolumeMetricStats {
