@@ -211,7 +211,9 @@ std::vector<nanovdb::GridHandle<nanovdb::HostBuffer>> parseNanoFile(const std::u
         take(&header, sizeof(header), "segment header");
         if (header.magic != NANOVDB_MAGIC_NUMBER) throw std::runtime_error("not a NanoVDB file (bad magic number)");
         if (header.version.getMajor() != NANOVDB_MAJOR_VERSION_NUMBER)
-            throw std::runtime_error("NanoVDB version " + std::string(header.version.c_str()) + " is not supported");
+            // Not version.c_str(): NanoVDB returns a malloc'd string the caller must free.
+            throw std::runtime_error("NanoVDB major version " + std::to_string(header.version.getMajor()) +
+                                     " is not supported (expected " + std::to_string(NANOVDB_MAJOR_VERSION_NUMBER) + ")");
         if (header.codec != nanovdb::io::Codec::NONE)
             throw std::runtime_error("compressed NanoVDB files are not supported (riemesh writes them uncompressed)");
         if (header.gridCount == 0) throw std::runtime_error("a segment holds no grid");

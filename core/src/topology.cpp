@@ -386,7 +386,10 @@ bool cutTunnel(Mesh& mesh, VertexHandle u, VertexHandle v, VertexHandle w)
     const std::array<VertexHandle, 3> loop{u, v, w};
     std::array<VertexHandle, 3> copy;
     for (int i = 0; i < 3; ++i) {
-        copy[i] = mesh.add_vertex(mesh.point(loop[i]));
+        // A copy, not mesh.point()'s reference: add_vertex may grow the point array it refers into
+        // (heap-use-after-free found by the ASan suite).
+        const Mesh::Point p = mesh.point(loop[i]);
+        copy[i] = mesh.add_vertex(p);
         mesh.copy_all_properties(loop[i], copy[i]); // velocity and any caller property (not status)
         mesh.property(velocity, copy[i]) = mesh.property(velocity, loop[i]);
     }

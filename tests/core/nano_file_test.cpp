@@ -135,6 +135,8 @@ TEST_CASE("nvdb reading: headers that claim more than the file holds are refused
         {"stored and grid sizes differ", [&](Bytes& f) { poke<std::uint64_t>(f, metaField(1, fileSizeAt), 64); }, "differ"},
         {"zip codec", [&](Bytes& f) { poke<std::uint16_t>(f, 14, 1); }, "compressed"},
         {"wrong magic", [&](Bytes& f) { f[0] ^= 0xff; }, "not a NanoVDB file"},
+        // Found by fuzz_nvdb_read: the message used NanoVDB's Version::c_str(), which leaks.
+        {"file version 31", [&](Bytes& f) { poke<std::uint32_t>(f, 8, 31u << 21); }, "major version 31"},
         {"grid magic", [&](Bytes& f) { f[l.grid[0]] ^= 0xff; }, "magic"},
         {"grid index 1", [&](Bytes& f) { poke<std::uint32_t>(f, l.grid[0] + offsetof(nanovdb::GridData, mGridIndex), 1); }, "count"},
         {"unterminated grid name", [&](Bytes& f) {
@@ -193,4 +195,20 @@ TEST_CASE("nvdb reading: a child offset pointing anywhere but a node of the leve
     std::memcpy(&child, f.data() + slot, 8);
     poke<std::int64_t>(f, slot, child + std::int64_t(sizeof(nanovdb::NanoLeaf<float>) / 2));
     CHECK(refusal(f).find("lower node child offset") != std::string::npos);
+}
+
+TEST_CASE("nano image: a point beyond int index range (or NaN) reads the background, no overflow")
+{
+    // Found by fuzz_nvdb_read: sampling a file whose transform puts the box at ~1e304 converted
+    // the index coordinate to int (undefined behaviour; the ASan/UBSan suite checks this case).
+    const Bytes file = validFile();
+    const NanoVolume v = NanoVolume::fromBytes(file.data(), file.size());
+    const NanoImage image(v.imageGrid());
+    CHECK(image.value(Vec3(1e300, -1e300, 5)) == 0.0);
+    CHECK(image.value(Vec3(std::numeric_limits<double>::quiet_NaN(), 1, 1)) == 0.0);
+    double value;
+    Vec3 gradient;
+    image.sample(Vec3(-3e9, 4e9, 1e20), value, gradient);
+    CHECK(value == 0.0);
+    CHECK(gradient.norm() == 0.0);
 }

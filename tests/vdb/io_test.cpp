@@ -18,8 +18,12 @@
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
+#include <functional>
+#include <iterator>
 #include <limits>
 #include <string>
+#include <utility>
+#include <vector>
 
 using namespace riemesh::vdb;
 using openvdb::Coord;
@@ -420,4 +424,42 @@ TEST_CASE("downsample: block averages keep the image's world placement and value
         CHECK(value == doctest::Approx(x.x() + 2 * x.y() + 3 * x.z()).epsilon(1e-4));
     }
     CHECK_THROWS(v.downsample(0));
+}
+
+TEST_CASE("vdb: bytes cut out of a file's middle are refused as corrupt (fuzz_vdb_read finding)")
+{
+    // The seed fuzz_vdb_read started from (fuzz/make_seeds.cpp: a double grid of four voxels). With
+    // bytes [5723, 8806) erased, OpenVDB read a Blosc chunk size of ~140 TB from the shifted bytes
+    // and allocated it: std::bad_alloc, which readVdbImage must report as a corrupt file (under
+    // ASan the vdb suite links fuzz/bounded_new.cpp so that such sizes throw there too). The same
+    // for erasures swept across the file.
+    TempDir dir;
+    auto d = openvdb::DoubleGrid::create(0.0);
+    d->setName("double");
+    for (int i = 0; i < 4; ++i) d->tree().setValue(openvdb::Coord(i, i, 2 * i), 1.0 + i);
+    writeVdb(dir / "d.vdb", {d});
+    std::string bytes;
+    {
+        std::ifstream in(dir / "d.vdb", std::ios::binary);
+        bytes.assign(std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>());
+    }
+    std::vector<std::pair<std::size_t, std::size_t>> cuts; // [begin, end) to erase
+    if (bytes.size() == 10064) cuts.push_back({5723, 8806}); // the finding, for this file layout
+    for (std::size_t at = 0; at + 64 < bytes.size(); at += 397) cuts.push_back({at, at + 64});
+    int refused = 0;
+    for (const auto& range : cuts) { // no structured binding: INFO's lambda captures (C++20 only)
+        const std::size_t begin = range.first, end = range.second;
+        std::string cut = bytes;
+        cut.erase(begin, end - begin);
+        { std::ofstream(dir / "cut.vdb", std::ios::binary) << cut; }
+        try {
+            (void)readVdbImage(dir / "cut.vdb");
+        } catch (const std::runtime_error& e) {
+            ++refused;
+            INFO("erased [" << begin << ", " << end << "): " << e.what());
+            CHECK(std::string(e.what()).find("cut.vdb") != std::string::npos);
+        }
+    }
+    MESSAGE(refused << " of " << cuts.size() << " cut files refused (the rest erase only metadata padding)");
+    CHECK(refused > 0);
 }

@@ -89,10 +89,10 @@ TEST_CASE("vdb2mesh args: bad values are BadInput naming the flag")
         {{"a.vdb"}, "expected INPUT and OUTPUT"},
         {{"a.vdb", "b.ply", "c.ply"}, "expected INPUT and OUTPUT"},
     };
-    for (const auto& [words, expect] : cases) {
-        const std::string message = refusal(words);
-        INFO(words.back() << ": " << message);
-        CHECK(message.find(expect) != std::string::npos);
+    for (const auto& c : cases) { // no structured binding: INFO's lambda captures (C++20 only)
+        const std::string message = refusal(c.first);
+        INFO(c.first.back() << ": " << message);
+        CHECK(message.find(c.second) != std::string::npos);
     }
 }
 

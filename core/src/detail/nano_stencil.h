@@ -21,11 +21,20 @@ struct Stencil {
 template<typename ValueT, typename AccessorT>
 inline void fetchStencil(const AccessorT& acc, const nanovdb::Vec3d& p, Stencil<ValueT>& s)
 {
-    const double fi = std::floor(p[0]), fj = std::floor(p[1]), fk = std::floor(p[2]);
-    const nanovdb::Coord ijk{int(fi), int(fj), int(fk)};
-    s.fx = p[0] - fi;
-    s.fy = p[1] - fj;
-    s.fz = p[2] - fk;
+    // Index coordinates beyond +-2^30 (or NaN; a far point, or a file's extreme transform) are
+    // clamped there: converting them to int would be undefined (found by fuzz_nvdb_read), and no
+    // grid reaches that far, so they read the background either way.
+    auto cell = [](double x, double& frac) {
+        constexpr double kFar = 1073741824.0;
+        const double f = std::floor(x);
+        if (!(std::abs(f) < kFar)) {
+            frac = 0;
+            return x > 0 ? int(kFar) : -int(kFar);
+        }
+        frac = x - f;
+        return int(f);
+    };
+    const nanovdb::Coord ijk{cell(p[0], s.fx), cell(p[1], s.fy), cell(p[2], s.fz)};
     if ((ijk[0] & 7) != 7 && (ijk[1] & 7) != 7 && (ijk[2] & 7) != 7) {
         const auto* leaf = acc.probeLeaf(ijk);
         if (!leaf) { // a tile or the background: the whole block has one value
