@@ -212,17 +212,22 @@ MetricGrids metricFromDense(const DenseTensor& T, const openvdb::math::Transform
     if (!(opt.tangentialGain >= 1.0) || !std::isfinite(opt.tangentialGain))
         throw std::invalid_argument("metric: tangentialGain must be >= 1");
     const double gain = opt.tangentialGain; // on xi_1, xi_2 (ev[1], ev[0]; ascending order)
-    auto mu = [&](double xi) { return 1.0 + span * std::clamp((xi / xiRef - t) / (1.0 - t), 0.0, 1.0); };
+    // The gain multiplies the excess over the noise threshold, not the eigenvalue itself: what noise
+    // leaves below t stays Euclidean whatever the gain (a boosted raw xi_1 let noise through at high
+    // noise and tangled the model).
+    auto mu = [&](double xi, double g) {
+        return 1.0 + span * std::clamp(g * (xi / xiRef - t) / (1.0 - t), 0.0, 1.0);
+    };
     std::vector<openvdb::Vec3f> diag(n), off(n);
     std::vector<std::uint8_t> active(n, 0);
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n, 4096), [&](const tbb::blocked_range<std::size_t>& rg) {
         Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> es;
         for (std::size_t v = rg.begin(); v != rg.end(); ++v) {
             const double trace = double(T.c[0][v]) + T.c[1][v] + T.c[2][v];
-            if (gain * trace <= t * xiRef) continue;
+            if (trace <= t * xiRef) continue;
             es.computeDirect(tensorAt(T, v));
             const Eigen::Vector3d ev = es.eigenvalues(); // ascending: xi_2, xi_1, xi_0
-            const Eigen::Vector3d m(mu(gain * ev[0]), mu(gain * ev[1]), mu(ev[2]));
+            const Eigen::Vector3d m(mu(ev[0], gain), mu(ev[1], gain), mu(ev[2], 1.0));
             if (m.maxCoeff() - 1.0 < opt.activeTolerance) continue;
             const Eigen::Matrix3d V = es.eigenvectors();
             const Eigen::Matrix3d G = V * m.asDiagonal() * V.transpose();

@@ -2,8 +2,8 @@
 //
 // Per voxel, with xi_0 >= xi_1 >= xi_2 the eigenvalues of J and w_i its eigenvectors (world space):
 //
-//   G = sum_i mu_i w_i w_i^T,   mu_i = 1 + (muMax - 1) * clamp((g_i xi_i / xi_ref - t) / (1 - t), 0, 1)
-//   (g_0 = 1, g_1 = g_2 = tangentialGain)
+//   G = sum_i mu_i w_i w_i^T,   mu_i = 1 + (muMax - 1) * clamp(g_i (xi_i / xi_ref - t) / (1 - t), 0, 1)
+//   (g_0 = 1, g_1 = g_2 = tangentialGain: the excess over the noise threshold is amplified)
 //
 // The paper only says the eigenvalues are "rescaled and thresholded" to [1, muMax]; our choice:
 // - xi_ref, the rescaling, is a robust maximum: the `referencePercentile` quantile of xi_0 over the
@@ -35,8 +35,9 @@ struct MetricOptions {
     double threshold = 0.1;             ///< minimum t (fraction of xi_ref) below which mu = 1
     double noiseFactor = 3.0;           ///< t >= noiseFactor * median(xi_0) / xi_ref
     double activeTolerance = 1e-3;      ///< voxels with all mu_i - 1 below this stay inactive (G = I)
-    /// xi_1 and xi_2 (the tangential eigenvalues, large only at edges and corners, where gradients of
-    /// several directions meet in the window) are multiplied by this before rescaling. At a right-angle
+    /// For xi_1 and xi_2 (the tangential eigenvalues, large only at edges and corners, where gradients
+    /// of several directions meet in the window) the excess over the threshold t is multiplied by
+    /// this, so noise below t stays Euclidean. At a right-angle
     /// edge xi_1 is about half of a face's xi_0, which alone gives mu_1 ~ 4 and edges about as long as
     /// on the faces (the [delta, zeta delta] window absorbs a factor 2); with 4 the edge and corner
     /// directions reach muMax and the sampling there is sqrt(muMax) times finer (paper 4.2, Fig. 4).
