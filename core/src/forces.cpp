@@ -43,13 +43,14 @@ void computeForces(const Mesh& mesh, const ScalarImage& image, const ForceOption
     for (auto e : mesh.edges()) {
         // each edge contributes each end to the other's umbrella, weighted by its metric stretch
         const auto h = mesh.halfedge_handle(e, 0);
-        const int a = mesh.from_vertex_handle(h).idx(), b = mesh.to_vertex_handle(h).idx();
-        const Vec3 pa = position(mesh, mesh.from_vertex_handle(h)), pb = position(mesh, mesh.to_vertex_handle(h));
+        const VertexHandle va = mesh.from_vertex_handle(h), vb = mesh.to_vertex_handle(h);
+        const int a = va.idx(), b = vb.idx();
+        const Vec3 pa = position(mesh, va), pb = position(mesh, vb);
         double w = 1.0;
         if (riemannian) {
             const Vec3 d = pb - pa;
             const double euclid = d.norm();
-            if (euclid > 0) w = metricLength(0.5 * (tensor[a] + tensor[b]), d) / euclid;
+            if (euclid > 0) w = metricLength(tensor[a], tensor[b], d) / euclid;
         }
         neighbourSum[a] += w * pb;
         neighbourSum[b] += w * pa;

@@ -24,7 +24,7 @@ double metricLength(const MetricField& metric, const Mesh& mesh, EdgeHandle e)
     const Vec3 u = position(mesh, mesh.from_vertex_handle(h)), v = position(mesh, mesh.to_vertex_handle(h));
     const Vec3 d = v - u;
     if (metric.isEuclidean()) return d.norm();
-    return metricLength(Mat3(0.5 * (metric.at(u) + metric.at(v))), d);
+    return metricLength(metric.at(u), metric.at(v), d);
 }
 
 ConstantMetric::ConstantMetric(const Mat3& g) : mG(g)

@@ -103,7 +103,7 @@ public:
     {
         const Vec3 d = position(mMesh, b) - position(mMesh, a);
         if (mMetric.isEuclidean()) return d.norm();
-        return metricLength(Mat3(0.5 * (vertexMetric(a) + vertexMetric(b))), d);
+        return metricLength(vertexMetric(a), vertexMetric(b), d);
     }
 
     /// Measures every edge once, queues the long and the short ones and counts the valences.

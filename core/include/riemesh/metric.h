@@ -31,6 +31,13 @@ public:
 /// Length of the displacement d (world units) under the constant tensor g: sqrt(d^T g d).
 inline double metricLength(const Mat3& g, const Vec3& d) { return std::sqrt(std::max(0.0, d.dot(g * d))); }
 
+/// Metric length of an edge d whose endpoints have tensors ga and gb: G is their mean (the edge rule
+/// of regularity, the umbrella and the mesh overload below; second order in the edge length).
+inline double metricLength(const Mat3& ga, const Mat3& gb, const Vec3& d)
+{
+    return metricLength(Mat3(0.5 * (ga + gb)), d);
+}
+
 /// Metric length of the segment u-v (world-space points), with G taken at the midpoint.
 double metricLength(const MetricField& metric, const Vec3& u, const Vec3& v);
 
