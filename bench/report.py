@@ -22,7 +22,7 @@ import subprocess
 import sys
 import time
 
-SECTIONS = ["phantom", "peers", "noise", "resolution", "head", "metric"]
+SECTIONS = ["phantom", "plate", "peers", "noise", "resolution", "head", "metric"]
 HEAD = "/usr/share/mricron/templates/ch2.nii.gz"
 
 
@@ -63,11 +63,12 @@ class Bench:
     def tool(self, name):
         return os.path.join(self.bin, name)
 
-    def phantom(self, size, noise, seed=1):
-        path = os.path.join(self.work, "phantom_s%d_n%g.vdb" % (size, noise))
+    def phantom(self, size, noise, seed=1, shape="cube-cavity"):
+        tag = "" if shape == "cube-cavity" else shape + "_"
+        path = os.path.join(self.work, "phantom_%ss%d_n%g.vdb" % (tag, size, noise))
         if not os.path.exists(path):
-            ok, _, _, why = self.run("vdbphantom %d %g" % (size, noise),
-                                     [self.tool("vdbphantom"), "cube-cavity", path, "--size", str(size),
+            ok, _, _, why = self.run("vdbphantom %s %d %g" % (shape, size, noise),
+                                     [self.tool("vdbphantom"), shape, path, "--size", str(size),
                                       "--noise", str(noise), "--seed", str(seed)], 120)
             if not ok:
                 return None
@@ -92,6 +93,7 @@ class Bench:
             row.update(vertices=s["vertices"], components=s["components"], genus=s["genus"],
                        iterations=s["iterations"], stop=s["stop"], seconds=s["seconds"],
                        metric_seconds=s["metric_seconds"], evolve_seconds=s["evolve_seconds"],
+                       read_seconds=s.get("read_seconds", 0.0), write_seconds=s.get("write_seconds", 0.0),
                        delta=j["parameters"]["delta_voxels"],
                        energy=[(it["iteration"], it["mean_kinetic_energy"]) for it in j["iterations"]])
             if "reference" in j:
@@ -303,20 +305,26 @@ class Report:
 
     @staticmethod
     def deltas(r, scale):
-        """The Euclidean models' deltas: 5th and 95th percentiles of the Riemannian result's edge
-        lengths; nominal 1.5 and 6 voxels (x scale) when that run failed or left no surface."""
+        """The Euclidean models' deltas, as in the paper (section 5: "the mesh resolutions of the
+        Euclidean models are chosen so as to correspond to the minimal and maximal edge lengths achieved
+        by our Riemannian model"): the shortest and the longest Euclidean edge of the Riemannian result,
+        plus its 5th and 95th percentiles for a sensitivity check. Nominal 1.5 and 6 voxels (x scale)
+        when that run failed or left no surface."""
         lengths = obj_edge_lengths(r["mesh"]) if ok(r) else []
         if not lengths:
-            return 1.5 * scale, 6.0 * scale, True
-        return percentile(lengths, 5), percentile(lengths, 95), False
+            return dict(fine=1.5 * scale, coarse=6.0 * scale, p5=1.5 * scale, p95=6.0 * scale, nominal=True)
+        return dict(fine=min(lengths), coarse=max(lengths), p5=percentile(lengths, 5),
+                    p95=percentile(lengths, 95), nominal=False)
 
-    def delta_text(self, p5, p95, nominal, unit):
-        if nominal:
+    def delta_text(self, d, unit):
+        if d["nominal"]:
             return ("Deltas: nominal fine %s and coarse %s %s, because the Riemannian run failed or left no "
-                    "surface to take edge lengths from.\n" % (fmt(p5), fmt(p95), unit))
-        return ("Deltas: the fine Euclidean model's delta is the 5th percentile of the Riemannian result's "
-                "Euclidean edge lengths (%s %s), the coarse one's the 95th percentile (%s %s).\n" % (
-                    fmt(p5), unit, fmt(p95), unit))
+                    "surface to take edge lengths from.\n" % (fmt(d["fine"]), fmt(d["coarse"]), unit))
+        return ("Deltas, as in the paper (\"the mesh resolutions of the Euclidean models are chosen so as to "
+                "correspond to the minimal and maximal edge lengths achieved by our Riemannian model\"): the "
+                "fine Euclidean model's delta is the Riemannian result's shortest Euclidean edge (%s %s), the "
+                "coarse one's its longest (%s %s). The Riemannian edges' 5th and 95th percentiles are %s and "
+                "%s %s.\n" % (fmt(d["fine"]), unit, fmt(d["coarse"]), unit, fmt(d["p5"]), fmt(d["p95"]), unit))
 
     # 1. Table 2 and Fig. 5 --------------------------------------------------------------------
     def phantom(self):
@@ -331,18 +339,28 @@ class Report:
             self.md.append("The phantom could not be made: %s\n" % b.failures[-1][1])
             return
         r = b.vdb2mesh("phantom_R", img, ["--delta", "%g" % (3 * self.scale)], self.timeout)
-        p5, p95, nominal = self.deltas(r, self.scale)
-        self.results["deltas"] = (p5, p95)
-        fe = b.vdb2mesh("phantom_FE", img, ["--metric", "euclidean", "--delta", "%.4g" % p5], self.timeout)
-        ce = b.vdb2mesh("phantom_CE", img, ["--metric", "euclidean", "--delta", "%.4g" % p95], self.timeout)
+        d = self.deltas(r, self.scale)
+        self.results["deltas"] = d
+        fe = b.vdb2mesh("phantom_FE", img, ["--metric", "euclidean", "--delta", "%.4g" % d["fine"]], self.timeout)
+        ce = b.vdb2mesh("phantom_CE", img, ["--metric", "euclidean", "--delta", "%.4g" % d["coarse"]], self.timeout)
         rows = [dict(ce, model="coarse Euclidean"), dict(r, model="Riemannian"), dict(fe, model="fine Euclidean")]
+        # Sensitivity: a fine model at the 5th percentile instead of the shortest edge.
+        fe5 = b.vdb2mesh("phantom_FE5", img, ["--metric", "euclidean", "--delta", "%.4g" % d["p5"]], self.timeout)
         self.results["table2"] = rows
+        self.results["table2_fe5"] = fe5
         b.write_csv("table2_phantom.csv", rows, ["model", "status", "delta", "seconds", "metric_seconds",
                                                    "evolve_seconds", "iterations", "stop", "vertices", "mean",
                                                    "hausdorff", "components", "genus"])
-        self.md.append(self.delta_text(p5, p95, nominal, "voxels"))
+        self.md.append(self.delta_text(d, "voxels"))
         self.md.append("The Riemannian model runs at vdb2mesh's default delta (3 voxels of metric length, scaled "
                        "with the box).\n")
+        if ok(fe5):
+            self.md.append("Sensitivity: a fine Euclidean model at the 5th percentile (delta %s) has %s vertices, "
+                           "mean error %s, Hausdorff %s, %s component(s) of genus %s.\n" % (
+                               fmt(fe5.get("delta")), fmt(fe5.get("vertices")), fmt(fe5.get("mean")),
+                               fmt_hausdorff(fe5.get("hausdorff")), fmt(fe5.get("components")), fmt(fe5.get("genus"))))
+        else:
+            self.md.append("Sensitivity run (fine Euclidean at the 5th percentile): %s.\n" % fe5["status"])
         self.md.append(table([
             ("model", lambda x: x["model"]), ("delta (vox)", lambda x: fmt(x.get("delta"))),
             ("seconds", lambda x: fmt(x.get("seconds"))), ("of which metric", lambda x: fmt(x.get("metric_seconds"))),
@@ -355,6 +373,56 @@ class Report:
                        "Riemannian 3 min 20 s / 4,829, fine 8 min 04 s / 8,499; structure tensor and metric 19 s.\n")
         # Cut through the middle (y = centre) to show the cavity and the hole.
         self.fig5(rows, "phantom", "Fig. 5", ["--clip", "y:%g" % (0.5 * (self.size - 1))])
+
+    # 1b. Thin plate: topology kept where the coarse model breaks it -----------------------------
+    def plate(self):
+        b = self.b
+        img = b.phantom(self.size, 0.5, shape="thin-plate")
+        self.section("Topology: the thin plate",
+                     "`vdbphantom thin-plate --size %d --noise 0.5 --seed 1`: a plate %s x %s x 3 voxels (one "
+                     "component of genus 0). The paper (4.2, 5): along flat contours the metric overestimates "
+                     "lengths across the contour, so the Riemannian model keeps thin structures that a Euclidean "
+                     "model of the same resolution punches through. Euclidean models at the phantom's coarse and "
+                     "fine deltas (Table 2) and at the Riemannian model's delta. Right topology = one component of "
+                     "genus 0 that covers the whole plate (Hausdorff distance below the 16-voxel cap)." % (
+                         self.size, fmt(0.7 * self.size), fmt(0.7 * self.size)))
+        if img is None:
+            self.md.append("The plate could not be made: %s\n" % b.failures[-1][1])
+            return
+        d = self.results.get("deltas") or self.deltas({"status": "none"}, self.scale)
+        runs = [("Riemannian", []),
+                ("coarse Euclidean", ["--metric", "euclidean", "--delta", "%.4g" % d["coarse"]]),
+                ("Euclidean at the Riemannian delta", ["--metric", "euclidean", "--delta", "%g" % (3 * self.scale)]),
+                ("fine Euclidean", ["--metric", "euclidean", "--delta", "%.4g" % d["fine"]])]
+        rows = []
+        for i, (model, extra) in enumerate(runs):
+            args = extra if extra else ["--delta", "%g" % (3 * self.scale)]
+            x = b.vdb2mesh("plate_%d" % i, img, args, self.timeout)
+            x["model"] = model
+            x["kept"] = ok(x) and x.get("components") == 1 and x.get("genus") == 0 and x.get("hausdorff", 99) < 16
+            rows.append(x)
+        self.results["plate"] = rows
+        b.write_csv("thin_plate.csv", rows, ["model", "status", "delta", "seconds", "iterations", "stop", "vertices",
+                                             "mean", "hausdorff", "components", "genus", "kept"])
+        self.md.append(table([
+            ("model", lambda x: x["model"]), ("delta (vox)", lambda x: fmt(x.get("delta"))),
+            ("vertices", lambda x: fmt(x.get("vertices"))),
+            ("iterations", lambda x: "%s (%s)" % (fmt(x.get("iterations")), x.get("stop", "–"))),
+            ("mean err (vox)", lambda x: fmt(x.get("mean"))),
+            ("Hausdorff (vox)", lambda x: fmt_hausdorff(x.get("hausdorff"))),
+            ("components", lambda x: fmt(x.get("components"))), ("genus", lambda x: fmt(x.get("genus"))),
+            ("plate kept", lambda x: ("yes" if x["kept"] else "**no**") if ok(x) else "–"),
+            ("status", lambda x: x["status"])], rows))
+        shots = []
+        for x in rows:
+            if ok(x) and x.get("vertices", 0) > 0:
+                png = os.path.join(b.out, "plate_%s.png" % x["name"].split("_")[1])
+                if b.render(x["mesh"], png, "%s: %s vertices" % (x["model"], fmt(x["vertices"])), ["--wire"]):
+                    shots.append((x["model"], png))
+        if shots:
+            self.md.append("\n| %s |\n|%s\n| %s |\n" % (" | ".join(m for m, _ in shots), "---|" * len(shots),
+                                                        " | ".join("![%s](%s)" % (m, os.path.basename(p))
+                                                                   for m, p in shots)))
 
     def fig5(self, rows, tag, figure, render_extra=()):
         b = self.b
@@ -532,12 +600,12 @@ class Report:
     def resolution(self):
         b = self.b
         sizes = [40, 48] if self.q else [100, 200, 300]
-        p5 = self.results.get("deltas", (1.5 * self.scale, None))[0] / self.scale  # at 100^3
+        p5 = self.results.get("deltas", {"fine": 1.5 * self.scale})["fine"] / self.scale  # at 100^3
         self.section("Resolution sweep",
                      "The phantom (noise 0.5, seed 1) at several box sizes. vdbphantom keeps voxels of one world "
                      "unit and scales the object with the box (cube half-size 0.3 N), so the same physical "
-                     "target is delta x N/100 voxels: Riemannian 3 x N/100, fine Euclidean %s x N/100 (the 5th "
-                     "percentile above). Errors are given in voxels of this size and in voxels of the 100^3 box "
+                     "target is delta x N/100 voxels: Riemannian 3 x N/100, fine Euclidean %s x N/100 (the "
+                     "shortest Riemannian edge above). Errors are given in voxels of this size and in voxels of the 100^3 box "
                      "(divided by N/100)." % fmt(p5))
         rows = []
         for s in sizes:
@@ -582,19 +650,20 @@ class Report:
             return
         cap, timeout = "1000", 480
         r = b.vdb2mesh("head_R", HEAD, ["--iso", "40", "--max-iterations", cap], timeout, reference=False)
-        p5, p95, nominal = self.deltas(r, 1.0)
-        fe = b.vdb2mesh("head_FE", HEAD, ["--iso", "40", "--metric", "euclidean", "--delta", "%.4g" % p5,
+        d = self.deltas(r, 1.0)
+        fe = b.vdb2mesh("head_FE", HEAD, ["--iso", "40", "--metric", "euclidean", "--delta", "%.4g" % d["fine"],
                                           "--max-iterations", cap], timeout, reference=False)
-        ce = b.vdb2mesh("head_CE", HEAD, ["--iso", "40", "--metric", "euclidean", "--delta", "%.4g" % p95,
+        ce = b.vdb2mesh("head_CE", HEAD, ["--iso", "40", "--metric", "euclidean", "--delta", "%.4g" % d["coarse"],
                                           "--max-iterations", cap], timeout, reference=False)
         rows = [dict(ce, model="coarse Euclidean"), dict(r, model="Riemannian"), dict(fe, model="fine Euclidean")]
         peers = b.peers(HEAD, "head", ["--iso", "40", "--adaptivity", "0,0.5", "--mc"], self.timeout)
         self.results["head"] = rows
+        self.results["head_peers"] = peers
         b.write_csv("table3_head.csv", rows, ["model", "status", "delta", "seconds", "metric_seconds", "evolve_seconds",
                                                "iterations", "stop", "vertices", "components", "genus"])
         b.write_csv("peers_head.csv", peers, ["tool", "setting", "status", "vertices", "triangles", "components",
                                                "genus", "closed_manifold", "seconds"])
-        self.md.append(self.delta_text(p5, p95, nominal, "mm"))
+        self.md.append(self.delta_text(d, "mm"))
         self.md.append("Iteration cap %s, timeout %d s per run.\n" % (cap, timeout))
         self.md.append(table([
             ("model", lambda x: x["model"]), ("delta (vox)", lambda x: fmt(x.get("delta"))),
@@ -673,8 +742,55 @@ class Report:
                          "mean error %s / %s = %.2fx, target <= 1.3x: %s." % (
                              fmt(r["vertices"]), fmt(fe["vertices"]), vr, verdict(vr, 0.5), fmt(r["mean"]),
                              fmt(fe["mean"]), er, verdict(er, 1.3)))
+            fe5 = self.results.get("table2_fe5")
+            if fe5 and ok(fe5):
+                lines.append("  Sensitivity: with the fine model at the 5th percentile of the Riemannian edges instead "
+                             "of the shortest, vertices %s / %s = %.2fx (%s), mean error %.2fx." % (
+                                 fmt(r["vertices"]), fmt(fe5["vertices"]), r["vertices"] / fe5["vertices"],
+                                 "under 0.5x" if r["vertices"] / fe5["vertices"] <= 0.5 else "over 0.5x",
+                                 r["mean"] / fe5["mean"]))
         else:
             lines.append("- Riemannian vs fine Euclidean: **not measured** (a run failed; see Table 2).")
+        plate = {x["model"]: x for x in self.results.get("plate", [])}
+        if plate:
+            rp = plate.get("Riemannian")
+            broken = [m for m, x in plate.items() if m != "Riemannian" and ok(x) and not x["kept"]]
+            if rp is None or not ok(rp):
+                v = "**not measured** (the Riemannian run failed)"
+            elif not rp["kept"]:
+                v = "**missed**: the Riemannian model lost the plate's topology"
+            elif broken:
+                v = "**met**: the Riemannian model keeps it; broken by %s" % ", ".join(broken)
+            else:
+                v = "**not shown**: every Euclidean model kept the plate too"
+            lines.append("- Topology kept where a coarse model punches holes (thin plate, 3 voxels): %s." % v)
+        if r and ok(r):
+            lines.append("- Phantom, total time (read, metric, evolve, write) %s s, target < 1.5 s: %s." % (
+                fmt(r["seconds"]), verdict(r["seconds"], 1.5)))
+        best = self.results.get("vdb_best")
+        if r and ok(r) and best and "seconds" in best:
+            pipe = r.get("read_seconds", 0.0) + best["seconds"]
+            ratio = r["seconds"] / pipe
+            lines.append("- Phantom, riemesh total time vs the OpenVDB pipeline (the same read, %s s, plus Gaussian "
+                         "smoothing and volumeToMesh at %s, %s s; its write not counted): %s / %s s = %.2fx, target "
+                         "<= 3x: %s." % (fmt(r.get("read_seconds")), best["setting"], fmt(best["seconds"]),
+                                         fmt(r["seconds"]), fmt(pipe), ratio, verdict(ratio, 3.0)))
+        head = {x["model"]: x for x in self.results.get("head", [])}
+        hr = head.get("Riemannian")
+        if hr and ok(hr):
+            lines.append("- Head MRI: %s component(s) of genus %s (target 1, <= 2), %s vertices (target <= 40,000), "
+                         "%s s (target < 20 s): %s." % (
+                             fmt(hr["components"]), fmt(hr["genus"]), fmt(hr["vertices"]), fmt(hr["seconds"]),
+                             "**met**" if hr["components"] == 1 and hr["genus"] <= 2 and hr["vertices"] <= 40000
+                             and hr["seconds"] < 20 else "**missed**"))
+            hp = [x for x in self.results.get("head_peers", []) if x.get("tool") == "openvdb" and "seconds" in x]
+            if hp:
+                p0 = hp[0]
+                pipe = hr.get("read_seconds", 0.0) + p0["seconds"]
+                ratio = hr["seconds"] / pipe
+                lines.append("- Head, riemesh total time vs the OpenVDB pipeline (same read plus smoothing and "
+                             "volumeToMesh at %s): %s / %s s = %.2fx, target <= 3x: %s." % (
+                                 p0["setting"], fmt(hr["seconds"]), fmt(pipe), ratio, verdict(ratio, 3.0)))
         best = self.results.get("vdb_best")
         if r and ok(r) and best:
             ratio = r["vertices"] / best["vertices"]
@@ -765,7 +881,7 @@ def main():
     load_start = os.getloadavg()
     date = datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
     # Order matters: peers and the resolution sweep use the phantom's Riemannian result.
-    for s in ["phantom", "peers", "noise", "resolution", "head", "metric"]:
+    for s in SECTIONS:
         if s in wanted:
             print("report.py: %s ..." % s, file=sys.stderr, flush=True)
             try:
