@@ -77,13 +77,34 @@ IterationStats Evolution::step()
     co.delta = o.delta;
     co.zeta = o.zeta;
     co.vmax = vmax;
-    const auto collisions = findCollisions(mMesh, mMetric, co);
+    std::vector<CollisionPair> contacts;
+    const auto collisions = findCollisions(mMesh, mMetric, co, &contacts);
     TopologyStats ts;
     if (!collisions.empty() || !rs.tunnels.empty()) {
         TopologyOptions to;
         to.neighbourhoodRadius = co.neighbourhoodFactor * collisionRadius(mMetric, co);
         ts = resolveTopology(mMesh, collisions, rs.tunnels, to);
     }
+    if (!ts.unresolved.empty() || !contacts.empty()) { // before garbage collection: handles valid
+        OpenMesh::VPropHandleT<Vec3> hold;
+        if (!mMesh.get_property_handle(hold, kHoldProperty)) {
+            mMesh.add_property(hold, kHoldProperty);
+            for (auto v : mMesh.all_vertices()) mMesh.property(hold, v) = Vec3::Zero();
+        }
+        for (const auto* pairs : {&ts.unresolved, &contacts})
+            for (const CollisionPair& c : *pairs) {
+                if (mMesh.status(c.u).deleted() || mMesh.status(c.w).deleted()) continue;
+                const Vec3 e = position(mMesh, c.w) - position(mMesh, c.u);
+                const double len = e.norm();
+                if (!(len > 0)) continue;
+                mMesh.property(hold, c.u) += e / len;
+                mMesh.property(hold, c.w) -= e / len;
+            }
+    }
+    OpenMesh::VPropHandleT<char> mergeZone; // fresh-merge zones last kMergeZoneIterations
+    if (mMesh.get_property_handle(mergeZone, kMergedProperty))
+        for (auto v : mMesh.vertices())
+            if (char& left = mMesh.property(mergeZone, v); left > 0) --left;
     const int iteration = int(mHistory.size()) + 1;
     if (ts.cuts) mLastCut = iteration;
     // Specks cut off from the surface have nothing to hold on to and shrink into degenerate faces:

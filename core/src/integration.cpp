@@ -1,5 +1,6 @@
 #include "riemesh/integration.h"
 
+#include <algorithm>
 #include <cmath>
 
 namespace riemesh {
@@ -10,6 +11,8 @@ IntegrationStats integrate(Mesh& mesh, const std::vector<Vec3>& forces, const In
     const auto velocity = velocityProperty(mesh);
     OpenMesh::VPropHandleT<Drift> drift;
     if (!mesh.get_property_handle(drift, kDriftProperty)) mesh.add_property(drift, kDriftProperty);
+    OpenMesh::VPropHandleT<Vec3> hold;
+    const bool holding = mesh.get_property_handle(hold, kHoldProperty);
     const double keep = options.driftDecay;
     const double dt = options.timeStep;
     const double invMass = 1.0 / options.mass;
@@ -26,6 +29,19 @@ IntegrationStats integrate(Mesh& mesh, const std::vector<Vec3>& forces, const In
         if (len > options.vmax) {
             d *= options.vmax / len;
             u = d / dt;
+        }
+        if (holding) {
+            Vec3& toward = mesh.property(hold, v);
+            const double norm = toward.norm();
+            if (norm > 0) {
+                const Vec3 n = toward / norm;
+                const double along = d.dot(n);
+                if (along > 0) {
+                    d -= along * n;
+                    u -= std::max(0.0, u.dot(n)) * n;
+                }
+                toward.setZero();
+            }
         }
         if (!std::isfinite(d.x()) || !std::isfinite(d.y()) || !std::isfinite(d.z())) {
             d.setZero();

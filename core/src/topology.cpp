@@ -207,6 +207,35 @@ void tagCut(Mesh& mesh, const std::vector<VertexHandle>& seeds, int rings)
 
 using Triangle = std::array<VertexHandle, 3>;
 
+/// Tags the band's vertices and every vertex within `rings` edges of them (kMergedProperty,
+/// kMergeZoneIterations).
+void tagMerge(Mesh& mesh, const std::vector<Triangle>& band, int rings)
+{
+    OpenMesh::VPropHandleT<char> prop;
+    if (!mesh.get_property_handle(prop, kMergedProperty)) {
+        mesh.add_property(prop, kMergedProperty);
+        for (auto v : mesh.all_vertices()) mesh.property(prop, v) = 0;
+    }
+    constexpr char fresh = char(kMergeZoneIterations);
+    std::vector<VertexHandle> frontier, next;
+    for (const Triangle& t : band)
+        for (auto v : t)
+            if (mesh.property(prop, v) != fresh) {
+                mesh.property(prop, v) = fresh;
+                frontier.push_back(v);
+            }
+    for (int r = 0; r < rings; ++r) {
+        next.clear();
+        for (auto v : frontier)
+            for (auto x : mesh.vv_range(v))
+                if (mesh.property(prop, x) != fresh) {
+                    mesh.property(prop, x) = fresh;
+                    next.push_back(x);
+                }
+        frontier.swap(next);
+    }
+}
+
 /// The band of merge (Fig. 3a) that zips loop `a` (forward) with loop `b` (backward) starting from
 /// the cross edge a[i0]-b[j0]. State (i, k): the current cross edge joins A(i) and B(-k); an A step
 /// adds (A(i), A(i+1), B(-k)) over the boundary halfedge A(i)->A(i+1), a B step adds
@@ -356,6 +385,7 @@ bool merge(Mesh& mesh, VertexHandle u, VertexHandle w)
             return false;
         }
     }
+    tagMerge(mesh, band, 2);
     return true;
 }
 
@@ -462,17 +492,21 @@ TopologyStats resolveTopology(Mesh& mesh, const std::vector<CollisionPair>& coll
                      [](const CollisionPair& x, const CollisionPair& y) { return x.distance < y.distance; });
     detail::BoundedPathSearch search;
     std::vector<VertexHandle> a, b;
+    auto reject = [&](const CollisionPair& c) {
+        ++stats.rejected;
+        if (isAlive(mesh, c.u) && isAlive(mesh, c.w)) stats.unresolved.push_back(c);
+    };
     for (const CollisionPair& c : order) {
-        if (!isUsable(c.u) || !isUsable(c.w) || !canMerge(mesh, c.u, c.w)) { ++stats.rejected; continue; }
+        if (!isUsable(c.u) || !isUsable(c.w) || !canMerge(mesh, c.u, c.w)) { reject(c); continue; }
         if (stats.merges + stats.cuts > 0) {
             const double bound = options.neighbourhoodRadius > 0
                                      ? options.neighbourhoodRadius
                                      : 1.5 * (meanEdgeLengthAround(mesh, c.u) + meanEdgeLengthAround(mesh, c.w));
-            if (search.isWithin(mesh, c.u, c.w, bound)) { ++stats.rejected; continue; }
+            if (search.isWithin(mesh, c.u, c.w, bound)) { reject(c); continue; }
         }
         collectLoop(mesh, c.u, a);
         collectLoop(mesh, c.w, b);
-        if (!merge(mesh, c.u, c.w)) { ++stats.rejected; continue; }
+        if (!merge(mesh, c.u, c.w)) { reject(c); continue; }
         ++stats.merges;
         markTouched(c.u);
         markTouched(c.w);

@@ -90,10 +90,12 @@ std::vector<CollisionPair> referenceCollisions(const Mesh& mesh, const MetricFie
     }
     OpenMesh::VPropHandleT<int> cutId;
     const bool hasCutIds = mesh.get_property_handle(cutId, kCutIdProperty);
+    OpenMesh::VPropHandleT<char> merged;
+    const bool hasMerged = mesh.get_property_handle(merged, kMergedProperty);
     std::vector<VertexHandle> live;
     for (auto v : mesh.vertices()) live.push_back(v);
 
-    // Plain Dijkstra: vertices within `bound` of `source` along edges (Euclidean lengths).
+    // Plain Dijkstra: edge-path lengths from `source` (Euclidean), infinite beyond `bound`.
     auto within = [&](VertexHandle source, double bound) {
         std::vector<double> dist(n, std::numeric_limits<double>::infinity());
         std::vector<char> done(n, 0);
@@ -117,7 +119,9 @@ std::vector<CollisionPair> referenceCollisions(const Mesh& mesh, const MetricFie
                 }
             }
         }
-        return done;
+        for (std::size_t i = 0; i < n; ++i)
+            if (!done[i]) dist[i] = std::numeric_limits<double>::infinity();
+        return dist;
     };
 
     std::vector<CollisionPair> result;
@@ -125,7 +129,7 @@ std::vector<CollisionPair> referenceCollisions(const Mesh& mesh, const MetricFie
     for (std::size_t i = 0; i < live.size(); ++i) {
         const VertexHandle u = live[i];
         const Vec3 pu = position(mesh, u), nu = normal[u.idx()];
-        std::vector<char> reached;
+        std::vector<double> path;
         for (std::size_t j = i + 1; j < live.size(); ++j) {
             const VertexHandle w = live[j];
             const Vec3 pw = position(mesh, w), nw = normal[w.idx()];
@@ -147,8 +151,13 @@ std::vector<CollisionPair> referenceCollisions(const Mesh& mesh, const MetricFie
                 distance = metricLength(metric, pu, pw);
                 if (distance > radius) continue;
             }
-            if (reached.empty()) reached = within(u, o.neighbourhoodFactor * radius);
-            if (reached[w.idx()]) continue;
+            // Close along the mesh: a path within the bound, and near a merge no detour either
+            // (<= 2 d_E + delta / 2).
+            if (path.empty()) path = within(u, o.neighbourhoodFactor * radius);
+            const bool nearMerge = hasMerged && (mesh.property(merged, u) || mesh.property(merged, w));
+            if (path[w.idx()] < std::numeric_limits<double>::infinity() &&
+                (!nearMerge || path[w.idx()] <= 2.0 * std::sqrt(d2) + 0.5 * o.delta))
+                continue;
             result.push_back({VertexHandle(std::min(u.idx(), w.idx())), VertexHandle(std::max(u.idx(), w.idx())), distance});
         }
     }
@@ -332,7 +341,14 @@ TEST_CASE("collision: same pairs as a brute-force reference on perturbed and fol
         const double r = (position(m, *m.vertices().begin()) - Vec3(-2.5, 1.0, 0.5)).norm();
         for (auto v : m.vertices()) m.point(v)[2] = 0.5 + (m.point(v)[2] - 0.5) * 1.6 / r;
         jitter(m, 0.1, rng);
+        Mesh tagged = m;
         meshes.emplace_back("pancake", std::move(m));
+        // The same pancake with its x > -2.5 half tagged as near a merge: there its two faces are
+        // joined around the rim by a detour, and pair up (the stricter rule of kMergedProperty).
+        OpenMesh::VPropHandleT<char> merged;
+        tagged.add_property(merged, kMergedProperty);
+        for (auto v : tagged.vertices()) tagged.property(merged, v) = position(tagged, v).x() > -2.5 ? 1 : 0;
+        meshes.emplace_back("pancake half near a merge", std::move(tagged));
     }
     {
         Mesh m = makeRegularSphere(Vec3::Zero(), 3, 1.0);
@@ -424,4 +440,29 @@ TEST_CASE("collision: a coarse box (edges near zeta delta) and its sharp edges n
         CHECK(findCollisions(box, EuclideanMetric(), o).empty());
         CHECK(findCollisions(box, ConstantMetric(Vec3(1, 1.5, 2).asDiagonal().toDenseMatrix()), o).empty());
     }
+}
+
+TEST_CASE("collision: near a merge, two sheets joined by a detour around a rim are collisions")
+{
+    // A pancake: its two faces 1.6 apart, joined around the rim. Untagged, the rim path (within
+    // the neighbourhood bound) hides many across pairs; tagged as near a merge (kMergedProperty),
+    // a path longer than 2 d_E + delta / 2 no longer does.
+    Mesh m = makeRegularSphere(Vec3::Zero(), 4, 1.0);
+    const double r = (position(m, *m.vertices().begin())).norm();
+    for (auto v : m.vertices()) m.point(v)[2] *= 0.8 / r;
+    const CollisionOptions o = optionsFor(m);
+    auto across = [&](const Mesh& mesh) {
+        int n = 0;
+        for (const auto& p : findCollisions(mesh, EuclideanMetric(), o))
+            n += position(mesh, p.u).z() * position(mesh, p.w).z() < 0;
+        return n;
+    };
+    const int plain = across(m);
+    OpenMesh::VPropHandleT<char> merged;
+    m.add_property(merged, kMergedProperty);
+    for (auto v : m.vertices()) m.property(merged, v) = 1;
+    const int tagged = across(m);
+    INFO("across pairs: untagged " << plain << ", near a merge " << tagged);
+    CHECK(tagged > plain);
+    CHECK(tagged > 100);
 }

@@ -32,6 +32,16 @@ struct TunnelCandidate {
 /// same id, so the two sides of a cut are not merged back while they separate. 0 = untagged.
 inline constexpr const char* kCutIdProperty = "riemesh:cut_id";
 
+/// Name of an optional per-vertex char property: merge tags the band's vertices and the two rings
+/// around them with kMergeZoneIterations. Near a fresh merge, the two sheets it joined are close
+/// along the mesh (through the band) yet still approach each other elsewhere: findCollisions
+/// judges pairs with a tagged vertex (> 0) by the stricter detour rule (see collision.h).
+/// Evolution counts the tags down once per iteration, so a zone lasts that many iterations (a
+/// lasting zone spreads with every merge it causes: a thin plate's rim then merged and cut 1,056
+/// times instead of 67). 0 = untagged.
+inline constexpr const char* kMergedProperty = "riemesh:merged";
+inline constexpr int kMergeZoneIterations = 10;
+
 /// True when merge(u, w) can run: both alive and distinct, not adjacent, closed one-rings
 /// disjoint, valence >= 3 each, no edge already joins a neighbour of u to a neighbour of w, and
 /// the two loops can be joined by a band that is embedded: its faces cross neither each other nor
@@ -60,6 +70,9 @@ struct TopologyStats {
     int merges = 0;   ///< Fig. 3a operations performed
     int cuts = 0;     ///< Fig. 3b operations performed
     int rejected = 0; ///< candidates skipped (already consumed by another edit, or unsafe)
+    /// Collision pairs left unresolved (both vertices still alive): the caller holds them still
+    /// (kHoldProperty in integration.h) so the two sheets cannot cross before a later merge.
+    std::vector<CollisionPair> unresolved;
 };
 
 struct TopologyOptions {

@@ -26,6 +26,9 @@ public:
         return std::size_t(v.idx()) < mStamp.size() && mStamp[v.idx()] == mCurrent && mSettled[v.idx()];
     }
 
+    /// The edge-path length from the last run's source to `v` when reached(v).
+    double distance(VertexHandle v) const { return mDistance[v.idx()]; }
+
     /// True when `to` is reachable from `from` by an edge path of length <= maxLength (world units).
     bool isWithin(const Mesh& mesh, VertexHandle from, VertexHandle to, double maxLength);
 
