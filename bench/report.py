@@ -648,7 +648,7 @@ class Report:
             self.md.append("Skipped: %s is missing (Debian package mricron-data).\n" % HEAD)
             b.failures.append(("head", "missing " + HEAD))
             return
-        cap, timeout = "1000", 480
+        cap, timeout = "400", 480
         r = b.vdb2mesh("head_R", HEAD, ["--iso", "40", "--max-iterations", cap], timeout, reference=False)
         d = self.deltas(r, 1.0)
         fe = b.vdb2mesh("head_FE", HEAD, ["--iso", "40", "--metric", "euclidean", "--delta", "%.4g" % d["fine"],
