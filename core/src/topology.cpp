@@ -184,25 +184,36 @@ OpenMesh::VPropHandleT<int> cutIdProperty(Mesh& mesh)
     return prop;
 }
 
+/// Sets property `prop` to `value` on `seeds` and on every vertex within `rings` edges of them
+/// (a breadth-first spread that stops at vertices already holding `value`).
+template <typename T>
+void tagRings(Mesh& mesh, OpenMesh::VPropHandleT<T> prop, T value, const std::vector<VertexHandle>& seeds, int rings)
+{
+    std::vector<VertexHandle> frontier, next;
+    for (auto v : seeds)
+        if (mesh.property(prop, v) != value) {
+            mesh.property(prop, v) = value;
+            frontier.push_back(v);
+        }
+    for (int r = 0; r < rings; ++r) {
+        next.clear();
+        for (auto v : frontier)
+            for (auto x : mesh.vv_range(v))
+                if (mesh.property(prop, x) != value) {
+                    mesh.property(prop, x) = value;
+                    next.push_back(x);
+                }
+        frontier.swap(next);
+    }
+}
+
 /// Tags `seeds` and every vertex within `rings` edges of them with a fresh cut id.
 void tagCut(Mesh& mesh, const std::vector<VertexHandle>& seeds, int rings)
 {
     const auto prop = cutIdProperty(mesh);
     int id = 0;
     for (auto v : mesh.vertices()) id = std::max(id, mesh.property(prop, v));
-    ++id;
-    std::vector<VertexHandle> frontier = seeds, next;
-    for (auto v : seeds) mesh.property(prop, v) = id;
-    for (int r = 0; r < rings; ++r) {
-        next.clear();
-        for (auto v : frontier)
-            for (auto x : mesh.vv_range(v))
-                if (mesh.property(prop, x) != id) {
-                    mesh.property(prop, x) = id;
-                    next.push_back(x);
-                }
-        frontier.swap(next);
-    }
+    tagRings(mesh, prop, id + 1, seeds, rings);
 }
 
 using Triangle = std::array<VertexHandle, 3>;
@@ -216,24 +227,9 @@ void tagMerge(Mesh& mesh, const std::vector<Triangle>& band, int rings)
         mesh.add_property(prop, kMergedProperty);
         for (auto v : mesh.all_vertices()) mesh.property(prop, v) = 0;
     }
-    constexpr char fresh = char(kMergeZoneIterations);
-    std::vector<VertexHandle> frontier, next;
-    for (const Triangle& t : band)
-        for (auto v : t)
-            if (mesh.property(prop, v) != fresh) {
-                mesh.property(prop, v) = fresh;
-                frontier.push_back(v);
-            }
-    for (int r = 0; r < rings; ++r) {
-        next.clear();
-        for (auto v : frontier)
-            for (auto x : mesh.vv_range(v))
-                if (mesh.property(prop, x) != fresh) {
-                    mesh.property(prop, x) = fresh;
-                    next.push_back(x);
-                }
-        frontier.swap(next);
-    }
+    std::vector<VertexHandle> seeds;
+    for (const Triangle& t : band) seeds.insert(seeds.end(), t.begin(), t.end());
+    tagRings(mesh, prop, char(kMergeZoneIterations), seeds, rings);
 }
 
 /// The band of merge (Fig. 3a) that zips loop `a` (forward) with loop `b` (backward) starting from
