@@ -613,9 +613,9 @@ std::string App::stateJson() const
     char buffer[512];
     std::snprintf(buffer, sizeof buffer,
                   "{\"iteration\": %d, \"vertices\": %zu, \"components\": %d, \"genus\": %d, \"playing\": %s, "
-                  "\"state\": \"%s\", \"computeSeconds\": %.4f, \"frameMs\": %.2f, \"merges\": %d, \"cuts\": %d, \"volume\": \"%s\"}",
+                  "\"state\": \"%s\", \"computeSeconds\": %.4f, \"frameMs\": %.2f, \"cpuMs\": %.2f, \"merges\": %d, \"cuts\": %d, \"volume\": \"%s\"}",
                   mIteration, mTopology.vertices, mTopology.components, mTopology.genus, mPlaying ? "true" : "false",
-                  stateName(), mComputeSeconds, mFrameInterval * 1e3, mMerges, mCuts, name.c_str());
+                  stateName(), mComputeSeconds, mFrameInterval * 1e3, mLastFrameMs, mMerges, mCuts, name.c_str());
     return buffer;
 }
 

@@ -102,7 +102,8 @@ public:
     const std::string& statusMessage() const { return mMessage; }
 
     /// The state as JSON (the page's JS API and tests): iteration, vertices, components, genus,
-    /// playing, state ("evolving", "paused", "converged", ...), computeSeconds, volume.
+    /// playing, state ("evolving", "paused", "converged", ...), computeSeconds, frameMs (frame interval,
+    /// smoothed), cpuMs (the last frame's model + UI time on the main thread), volume.
     std::string stateJson() const;
     /// Sets a model parameter by name (iso, delta, zeta, mu_scale, riemannian, inflation, umbrella,
     /// curvature, gradient) as if changed in the UI; false for an unknown name.
