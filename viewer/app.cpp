@@ -621,6 +621,21 @@ std::string App::stateJson() const
 
 bool App::setParameter(const std::string& name, double value)
 {
+    // Display settings (as in the Display panel): they do not touch the model.
+    if (name == "colour") {
+        mColour = ColourMode(std::clamp(int(value), 0, 2));
+        mMeshDirty = true;
+        return true;
+    }
+    if (name == "wireframe") { mScene.wireframe = value != 0; return true; }
+    if (name == "show_mesh") { mScene.showMesh = value != 0; return true; }
+    if (name == "show_slice") { mScene.showSlice = value != 0; return true; }
+    if (name == "slice_axis" || name == "slice_position") {
+        if (name == "slice_axis") mSliceAxis = std::clamp(int(value), 0, 2);
+        else mSlicePosition = float(std::clamp(value, 0.0, 1.0));
+        mSliceDirty = mMeshDirty = true;
+        return true;
+    }
     bool metric = false;
     if (name == "iso") mParams.iso = value;
     else if (name == "delta") mParams.deltaVoxels = value;

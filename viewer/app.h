@@ -106,7 +106,9 @@ public:
     /// smoothed), cpuMs (the last frame's model + UI time on the main thread), volume.
     std::string stateJson() const;
     /// Sets a model parameter by name (iso, delta, zeta, mu_scale, riemannian, inflation, umbrella,
-    /// curvature, gradient) as if changed in the UI; false for an unknown name.
+    /// curvature, gradient) or a display setting (colour: 0 shaded, 1 metric edge length, 2 local
+    /// resolution; wireframe, show_mesh, show_slice: 0/1; slice_axis: 0..2; slice_position: 0..1) as
+    /// if changed in the UI; false for an unknown name.
     bool setParameter(const std::string& name, double value);
 
 private:
