@@ -327,69 +327,47 @@ void App::handleCameraInput(int width, int height)
 
 void App::rebuildMeshGeometry()
 {
+    // One pass over the faces (triangles, area-weighted normals, cross-section) and one over the edges
+    // (edge lengths for the colour), instead of circulating around every vertex: the same values as
+    // vertexNormal() and the per-vertex means of before, for a fraction of the time (12 -> ~3 ms per
+    // rebuild at 20k vertices in WebAssembly), which matters since it runs every frame while evolving.
     Scene& s = mScene;
-    s.vertices.clear();
-    s.triangles.clear();
-    s.edges.clear();
-    std::vector<std::uint32_t> index(mMesh.n_vertices(), 0);
-    std::vector<float> value(mMesh.n_vertices(), 0.f);
-    const double delta = evolutionOptions().delta;
-    float lo = 1e30f, hi = -1e30f;
+    const std::size_t nv = mMesh.n_vertices();
+    auto& pos = mScratchPositions;
+    auto& nrm = mScratchNormals;
+    auto& value = mScratchValues;
+    auto& count = mScratchCounts;
+    auto& index = mScratchIndex;
+    pos.resize(nv);
+    nrm.assign(nv, Vec3::Zero());
+    index.assign(nv, 0);
     std::uint32_t n = 0;
     for (auto v : mMesh.vertices()) {
         index[v.idx()] = n++;
-        if (mColour == ColourMode::Shaded) continue;
-        const Vec3 p = position(mMesh, v);
-        const Mat3 g = mColour == ColourMode::MetricEdgeLength ? mMetric->at(p) : Mat3::Identity();
-        double sum = 0;
-        int count = 0;
-        for (auto w : mMesh.vv_range(v)) {
-            const Vec3 e = position(mMesh, w) - p;
-            sum += std::sqrt(e.dot(g * e));
-            ++count;
-        }
-        const float x = count ? float(sum / count / delta) : 0.f;
-        value[v.idx()] = x;
-        lo = std::min(lo, x);
-        hi = std::max(hi, x);
+        pos[v.idx()] = position(mMesh, v);
     }
-    // Metric edge length: fixed scale [1, zeta] (the regularity band); local resolution: the mesh's range.
-    float a = 1.f, b = float(mParams.zeta);
-    if (mColour == ColourMode::LocalResolution) {
-        a = lo;
-        b = std::max(hi, lo + 1e-6f);
-    }
-    s.vertices.reserve(std::size_t(n) * 9);
-    for (auto v : mMesh.vertices()) {
-        const Vec3 p = position(mMesh, v);
-        const Vec3 nrm = vertexNormal(mMesh, v);
-        const Vec3f col = mColour == ColourMode::Shaded ? Vec3f(0.85f, 0.72f, 0.55f)
-                                                        : colourMap((value[v.idx()] - a) / (b - a));
-        const float f[9] = {float(p.x()), float(p.y()), float(p.z()), float(nrm.x()), float(nrm.y()),
-                            float(nrm.z()), col.x(), col.y(), col.z()};
-        s.vertices.insert(s.vertices.end(), f, f + 9);
-    }
-    s.triangles.reserve(mMesh.n_faces() * 3);
-    for (auto f : mMesh.faces())
-        for (auto v : mMesh.fv_range(f)) s.triangles.push_back(index[v.idx()]);
-    s.edges.reserve(mMesh.n_edges() * 2);
-    for (auto e : mMesh.edges()) {
-        s.edges.push_back(index[mMesh.from_vertex_handle(mMesh.halfedge_handle(e, 0)).idx()]);
-        s.edges.push_back(index[mMesh.to_vertex_handle(mMesh.halfedge_handle(e, 0)).idx()]);
-    }
-    // Cross-section with the slice plane.
+
+    s.triangles.resize(std::size_t(3) * mMesh.n_faces());
     s.section.clear();
     const Box3 bounds = mImage->bounds();
     const double plane = bounds.min()[mSliceAxis] + mSlicePosition * bounds.sizes()[mSliceAxis];
+    std::size_t t = 0;
     for (auto f : mMesh.faces()) {
-        Vec3 p[3];
-        double d[3];
-        int k = 0;
-        for (auto v : mMesh.fv_range(f)) {
-            p[k] = position(mMesh, v);
-            d[k] = p[k][mSliceAxis] - plane;
-            ++k;
+        // fv_range order: to(h), to(next h), to(next next h) = from(h), with h the face's halfedge.
+        const auto h0 = mMesh.halfedge_handle(f);
+        const auto h1 = mMesh.next_halfedge_handle(h0);
+        const int iv[3] = {mMesh.to_vertex_handle(h0).idx(), mMesh.to_vertex_handle(h1).idx(),
+                           mMesh.from_vertex_handle(h0).idx()};
+        const Vec3 p[3] = {pos[iv[0]], pos[iv[1]], pos[iv[2]]};
+        // vertexNormal(): sum of (b - a) x (c - a) with a = from(h), b = to(h), c = to(next h).
+        const Vec3 fn = (p[0] - p[2]).cross(p[1] - p[2]);
+        for (int k = 0; k < 3; ++k) {
+            nrm[iv[k]] += fn;
+            s.triangles[t++] = index[iv[k]];
         }
+        // Cross-section with the slice plane.
+        const double d[3] = {p[0][mSliceAxis] - plane, p[1][mSliceAxis] - plane, p[2][mSliceAxis] - plane};
+        const std::size_t before = s.section.size();
         for (int i = 0; i < 3; ++i) {
             const int j = (i + 1) % 3;
             if ((d[i] < 0) != (d[j] < 0)) {
@@ -397,7 +375,70 @@ void App::rebuildMeshGeometry()
                 s.section.insert(s.section.end(), {float(x.x()), float(x.y()), float(x.z())});
             }
         }
-        if (s.section.size() % 6 != 0) s.section.resize(s.section.size() - 3); // a vertex on the plane
+        if (s.section.size() - before == 3) s.section.resize(before); // a vertex on the plane
+    }
+    s.triangles.resize(t);
+
+    // Mean length of the edges around each vertex, measured with the metric at the vertex (metric edge
+    // length) or Euclidean (local resolution), over delta.
+    s.edges.resize(std::size_t(2) * mMesh.n_edges());
+    std::size_t k = 0;
+    const bool coloured = mColour != ColourMode::Shaded;
+    if (coloured) {
+        value.assign(nv, 0.0);
+        count.assign(nv, 0);
+        if (mColour == ColourMode::MetricEdgeLength) {
+            mScratchMetric.resize(nv);
+            for (auto v : mMesh.vertices()) mScratchMetric[v.idx()] = mMetric->at(pos[v.idx()]);
+        }
+    }
+    for (auto e : mMesh.edges()) {
+        const auto h = mMesh.halfedge_handle(e, 0);
+        const int a = mMesh.from_vertex_handle(h).idx(), b = mMesh.to_vertex_handle(h).idx();
+        s.edges[k++] = index[a];
+        s.edges[k++] = index[b];
+        if (!coloured) continue;
+        const Vec3 d = pos[b] - pos[a];
+        if (mColour == ColourMode::MetricEdgeLength) {
+            value[a] += std::sqrt(d.dot(mScratchMetric[a] * d));
+            value[b] += std::sqrt(d.dot(mScratchMetric[b] * d));
+        } else {
+            const double l = std::sqrt(d.dot(d));
+            value[a] += l;
+            value[b] += l;
+        }
+        ++count[a];
+        ++count[b];
+    }
+    s.edges.resize(k);
+    const double delta = evolutionOptions().delta;
+    float lo = 1e30f, hi = -1e30f;
+    if (coloured)
+        for (auto v : mMesh.vertices()) {
+            const int i = v.idx();
+            const float x = count[i] ? float(value[i] / count[i] / delta) : 0.f;
+            value[i] = x;
+            lo = std::min(lo, x);
+            hi = std::max(hi, x);
+        }
+    // Metric edge length: fixed scale [1, zeta] (the regularity band); local resolution: the mesh's range.
+    float a = 1.f, b = float(mParams.zeta);
+    if (mColour == ColourMode::LocalResolution) {
+        a = lo;
+        b = std::max(hi, lo + 1e-6f);
+    }
+    s.vertices.resize(std::size_t(n) * 9);
+    float* out = s.vertices.data();
+    for (auto v : mMesh.vertices()) {
+        const int i = v.idx();
+        const Vec3& p = pos[i];
+        const double len = nrm[i].norm();
+        const Vec3 u = len > 0 ? Vec3(nrm[i] / len) : Vec3::Zero();
+        const Vec3f col = coloured ? colourMap((float(value[i]) - a) / (b - a)) : Vec3f(0.85f, 0.72f, 0.55f);
+        const float f[9] = {float(p.x()), float(p.y()), float(p.z()), float(u.x()), float(u.y()),
+                            float(u.z()), col.x(), col.y(), col.z()};
+        std::copy(f, f + 9, out);
+        out += 9;
     }
     ++s.meshVersion;
     mMeshDirty = false;
@@ -439,6 +480,28 @@ void App::rebuildSlice()
     sl.corners[3] = corner(b.min()[ua], b.max()[va]);
     ++mScene.sliceVersion;
     mSliceDirty = false;
+}
+
+void App::updateTopology()
+{
+    // Components need a traversal of the mesh (~2 ms at 20k vertices in WebAssembly). Only merges and
+    // cuts change them (the other operations keep the topology), so while evolving they are counted
+    // again after such an event, every 10th rebuild and whenever the model stops; in between the
+    // counts come from the geometry just rebuilt and the genus from the Euler characteristic.
+    const int events = mMerges + mCuts;
+    const bool running = mPlaying && mEvolution && !mEvolution->done();
+    if (!running || events != mTopologyEvents || --mTopologyCountdown <= 0) {
+        mTopology = topologyOf(mMesh);
+        mTopologyEvents = events;
+        mTopologyCountdown = 10;
+        return;
+    }
+    MeshTopology& t = mTopology;
+    t.vertices = mScene.vertices.size() / 9;
+    t.edges = mScene.edges.size() / 2;
+    t.faces = mScene.triangles.size() / 3;
+    t.euler = int(t.vertices) - int(t.edges) + int(t.faces);
+    t.genus = (2 * t.components - t.euler) / 2;
 }
 
 void App::updateStatistics()
@@ -662,7 +725,7 @@ void App::frame(double budgetMs, int width, int height)
     if (mSliceDirty && mImage) rebuildSlice();
     if (mMeshDirty) {
         rebuildMeshGeometry();
-        mTopology = topologyOf(mMesh);
+        updateTopology();
         // Statistics cost a metric evaluation per edge: every few frames while evolving.
         if (--mStatsCountdown <= 0 || !mPlaying || (mEvolution && mEvolution->done())) {
             updateStatistics();

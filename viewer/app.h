@@ -128,6 +128,7 @@ private:
     double mComputeSeconds = 0;
     double mWallStart = 0;
     MeshTopology mTopology;
+    int mTopologyEvents = 0, mTopologyCountdown = 0; ///< see updateTopology()
     int mMerges = 0, mCuts = 0;
     int mIterationBase = 0;            ///< iterations of previous Evolution objects (metric changes)
     int mIteration = 0;
@@ -136,6 +137,12 @@ private:
     float mHistogramMax = 0;
     // display
     Scene mScene;
+    // rebuildMeshGeometry()'s per-vertex work arrays, kept to reuse their memory
+    std::vector<Vec3> mScratchPositions, mScratchNormals;
+    std::vector<Mat3> mScratchMetric;
+    std::vector<double> mScratchValues;
+    std::vector<int> mScratchCounts;
+    std::vector<std::uint32_t> mScratchIndex;
     ColourMode mColour = ColourMode::MetricEdgeLength;
     int mSliceAxis = 2;
     float mSlicePosition = 0.5f;       ///< fraction of the bounds along the axis
@@ -158,6 +165,7 @@ private:
     void handleCameraInput(int width, int height);
     void rebuildMeshGeometry();
     void rebuildSlice();
+    void updateTopology();
     void updateStatistics();
     void drawPanels();
     void applyParameters(bool metricChanged);
