@@ -148,6 +148,7 @@ private:
     float mSlicePosition = 0.5f;       ///< fraction of the bounds along the axis
     float mWindow = 1.f, mLevel = 0.5f;
     bool mSliceDirty = true, mMeshDirty = true;
+    bool mGeometryAtRest = false; ///< the scene's mesh was built while the model was not evolving
     int mStatsCountdown = 0;
     std::string mMessage;
     std::optional<std::string> mDownload;

@@ -2,8 +2,9 @@
 // Chromium's software WebGL). Opens build-wasm/web/ in headless Chromium (SwiftShader), and for the
 // demo's own coarse mesh (~1.5k vertices) and for a fine uniform model (Euclidean, small delta: ~20k
 // vertices) prints
-//   - draw: the scene's draw alone (mesh, slice, cross-section), each render waited for by a pixel read
-//     back (Module.ccall('riemesh_time_draw', n)): what the mesh costs the GPU process;
+//   - draw: the scene's draw alone (mesh, slice, cross-section; then with the wireframe too), each
+//     render waited for by a pixel read back (Module.ccall('riemesh_time_draw', n)): what the mesh
+//     costs the GPU process;
 //   - frame interval: the time between the page's animation frames (requestAnimationFrame timestamps
 //     over a few seconds; median, mean, 90th percentile), paused and while evolving, and the viewer's
 //     own main-thread time per frame (model + UI, "cpuMs" of riemesh.state()).
@@ -87,9 +88,9 @@ try {
       vmin: Math.min(...r.vertices), vmax: Math.max(...r.vertices),
     };
   };
-  const report = (label, s, draw, paused, evolving) => {
+  const report = (label, s, draw, drawWire, paused, evolving) => {
     console.log(`frame_bench: ${label}: ${s.vertices} vertices, ${s.iteration} iterations (${s.state})`);
-    console.log(`frame_bench:   draw ${fmt(draw)} ms (mean of 20 waited-for renders, median of ${rounds})`);
+    console.log(`frame_bench:   draw ${fmt(draw)} ms, with the wireframe ${fmt(drawWire)} ms (mean of 20 waited-for renders, median of ${rounds})`);
     const line = (what, f) => console.log(
       `frame_bench:   ${what} frame interval median ${fmt(f.median)} ms, mean ${fmt(f.mean)}, p90 ${fmt(f.p90)} ` +
       `(${f.frames} frames; viewer main thread ${fmt(f.cpu)} ms/frame` +
@@ -102,6 +103,9 @@ try {
     await sleep(500);
     const s = await state();
     const draw = await drawMs();
+    await page.evaluate(() => window.riemesh.set('wireframe', 1));
+    const drawWire = await drawMs();
+    await page.evaluate(() => window.riemesh.set('wireframe', 0));
     const paused = [];
     for (let i = 0; i < rounds; i++) paused.push(await frames(2000, false));
     await page.evaluate(() => { window.riemesh.set('inflation', 1.0); window.riemesh.play(); });
@@ -109,7 +113,7 @@ try {
     for (let i = 0; i < rounds; i++) evolving.push(await frames(2000, true));
     await page.evaluate(() => window.riemesh.pause());
     const pick = (xs) => xs.sort((a, b) => a.median - b.median)[Math.floor(xs.length / 2)];
-    report(label, s, draw, pick(paused), pick(evolving));
+    report(label, s, draw, drawWire, pick(paused), pick(evolving));
   };
 
   // The demo's coarse mesh (the paper's phantom with its metric), once it has converged.
