@@ -635,7 +635,14 @@ void App::drawPanels()
     ImGui::Text("vertices %zu  faces %zu", mTopology.vertices, mTopology.faces);
     ImGui::Text("components %d  genus %d", mTopology.components, mTopology.genus);
     ImGui::Text("merges %d  cuts %d  compute %.2f s", mMerges, mCuts, mComputeSeconds);
-    ImGui::Text("frame %.0f ms (model + UI %.0f ms)", mFrameInterval * 1e3, mLastFrameMs);
+    // Refreshed twice a second: a number that changes every frame would make every frame a new image
+    // (the page does not draw a frame that shows the same image as the last one).
+    if (nowSeconds() - mShownAt >= 0.5) {
+        mShownAt = nowSeconds();
+        mShownIntervalMs = mFrameInterval * 1e3;
+        mShownFrameMs = mLastFrameMs;
+    }
+    ImGui::Text("frame %.0f ms (model + UI %.0f ms)", mShownIntervalMs, mShownFrameMs);
     if (mColour == ColourMode::MetricEdgeLength)
         ImGui::TextDisabled("colour: metric edge length / delta, 1 (purple) .. zeta (yellow)");
     else if (mColour == ColourMode::LocalResolution)

@@ -154,6 +154,7 @@ private:
     std::optional<std::string> mDownload;
     double mLastFrameMs = 0;
     double mLastFrameStart = 0, mFrameInterval = 0; ///< seconds, smoothed
+    double mShownAt = -1, mShownIntervalMs = 0, mShownFrameMs = 0; ///< the figures the panel shows
 
     void installVolume(std::unique_ptr<NanoVolume> volume, std::unique_ptr<ScalarImage> image,
                        std::unique_ptr<MetricField> metric, const std::string& name);

@@ -6,8 +6,10 @@
 //     render waited for by a pixel read back (Module.ccall('riemesh_time_draw', n)): what the mesh
 //     costs the GPU process;
 //   - frame interval: the time between the page's animation frames (requestAnimationFrame timestamps
-//     over a few seconds; median, mean, 90th percentile), paused and while evolving, and the viewer's
-//     own main-thread time per frame (model + UI, "cpuMs" of riemesh.state()).
+//     over a few seconds; median, mean, 90th percentile) paused (an unchanged image is not drawn
+//     again), paused while the camera orbits (a mouse drag: every frame draws the scene) and while
+//     evolving (every frame runs an evolution step, rebuilds the geometry and draws), and the
+//     viewer's own main-thread time per frame (model + UI, "cpuMs" of riemesh.state()).
 // Prints figures; asserts nothing (speed targets live in benchmarks, not tests). The machine's load
 // moves every figure: compare figures of one run.
 //
@@ -88,7 +90,25 @@ try {
       vmin: Math.min(...r.vertices), vmax: Math.max(...r.vertices),
     };
   };
-  const report = (label, s, draw, drawWire, paused, evolving) => {
+  // The same while the camera orbits (a left-drag over the view, right of the UI panel): every
+  // frame then draws the whole scene.
+  const orbit = async (ms) => {
+    await page.mouse.move(900, 420);
+    await page.mouse.down();
+    const result = frames(ms, false);
+    const end = Date.now() + ms;
+    let x = 900, step = 4;
+    while (Date.now() < end) {
+      x += step;
+      if (x > 1000 || x < 800) step = -step;
+      await page.mouse.move(x, 420);
+      await sleep(5);
+    }
+    const r = await result;
+    await page.mouse.up();
+    return r;
+  };
+  const report = (label, s, draw, drawWire, paused, orbiting, evolving) => {
     console.log(`frame_bench: ${label}: ${s.vertices} vertices, ${s.iteration} iterations (${s.state})`);
     console.log(`frame_bench:   draw ${fmt(draw)} ms, with the wireframe ${fmt(drawWire)} ms (mean of 20 waited-for renders, median of ${rounds})`);
     const line = (what, f) => console.log(
@@ -96,6 +116,7 @@ try {
       `(${f.frames} frames; viewer main thread ${fmt(f.cpu)} ms/frame` +
       (f.iterations ? `; ${f.iterations} iterations, ${f.vmin}..${f.vmax} vertices)` : ')'));
     line('paused  ', paused);
+    line('orbiting', orbiting);
     if (evolving) line('evolving', evolving);
   };
   const measure = async (label) => {
@@ -108,12 +129,14 @@ try {
     await page.evaluate(() => window.riemesh.set('wireframe', 0));
     const paused = [];
     for (let i = 0; i < rounds; i++) paused.push(await frames(2000, false));
+    const orbiting = [];
+    for (let i = 0; i < rounds; i++) orbiting.push(await orbit(2000));
     await page.evaluate(() => { window.riemesh.set('inflation', 1.0); window.riemesh.play(); });
     const evolving = [];
     for (let i = 0; i < rounds; i++) evolving.push(await frames(2000, true));
     await page.evaluate(() => window.riemesh.pause());
     const pick = (xs) => xs.sort((a, b) => a.median - b.median)[Math.floor(xs.length / 2)];
-    report(label, s, draw, drawWire, pick(paused), pick(evolving));
+    report(label, s, draw, drawWire, pick(paused), pick(orbiting), pick(evolving));
   };
 
   // The demo's coarse mesh (the paper's phantom with its metric), once it has converged.
