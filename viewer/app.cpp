@@ -380,11 +380,16 @@ void App::handleCameraInput(int width, int height)
         }
         if (io.MouseWheel != 0) c.distance *= std::pow(0.88f, io.MouseWheel);
     }
-    if (!io.WantCaptureKeyboard) {
-        if (ImGui::IsKeyPressed('F', false)) frameCamera();
-        if (ImGui::IsKeyPressed('H', false)) homeCamera();
-        if (ImGui::IsKeyPressed(ImGui::GetKeyIndex(ImGuiKey_Space), false)) mPlaying = !mPlaying;
+    // Shortcuts from the queued key presses (keyPressed()), not from ImGui's key state: a press and
+    // release between two frames (a quick tap, or an idle page that does not draw) leave no trace in
+    // ImGui 1.86's KeysDown.
+    for (const int key : mPendingKeys) {
+        if (io.WantCaptureKeyboard) break;
+        if (key == 'F') frameCamera();
+        else if (key == 'H') homeCamera();
+        else if (key == ' ') mPlaying = !mPlaying;
     }
+    mPendingKeys.clear();
     (void)width;
 }
 

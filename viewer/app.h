@@ -94,6 +94,10 @@ public:
     /// Runs without UI until the evolution stops (native `--headless`); returns the final stats line.
     std::string runToConvergence();
 
+    /// A key went down (GLFW key code: 'F' frames the mesh, 'H' homes the camera, ' ' plays/pauses),
+    /// handled by the next frame() unless ImGui has the keyboard.
+    void keyPressed(int key) { mPendingKeys.push_back(key); }
+
     const Scene& scene() const { return mScene; }
     bool playing() const { return mPlaying; }
     void setPlaying(bool playing) { mPlaying = playing; }
@@ -150,6 +154,7 @@ private:
     bool mSliceDirty = true, mMeshDirty = true;
     bool mGeometryAtRest = false; ///< the scene's mesh was built while the model was not evolving
     int mStatsCountdown = 0;
+    std::vector<int> mPendingKeys;
     std::string mMessage;
     std::optional<std::string> mDownload;
     double mLastFrameMs = 0;

@@ -55,6 +55,12 @@ void onDrop(GLFWwindow*, int count, const char** paths)
     if (count > 0 && gViewer) gViewer->app.loadVolume(paths[count - 1]);
 }
 
+void onKey(GLFWwindow*, int key, int, int action, int)
+{
+    // Chained by the ImGui GLFW backend (installed before it), which then records the key itself.
+    if (action == GLFW_PRESS && gViewer) gViewer->app.keyPressed(key);
+}
+
 void offerDownload(const std::string& path)
 {
 #ifdef __EMSCRIPTEN__
@@ -258,6 +264,7 @@ int run(int argc, char** argv)
     glfwMakeContextCurrent(v.window);
     glfwSwapInterval(1);
     glfwSetDropCallback(v.window, onDrop);
+    glfwSetKeyCallback(v.window, onKey); // before ImGui_ImplGlfw_InitForOpenGL, which chains it
 
     IMGUI_CHECKVERSION();
     ImGui::CreateContext();
