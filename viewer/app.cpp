@@ -770,6 +770,7 @@ bool App::setParameter(const std::string& name, double value)
         mMeshDirty = true;
         return true;
     }
+    if (name == "camera_yaw") { mScene.camera.yaw = float(value); return true; }
     if (name == "wireframe") { mScene.wireframe = value != 0; return true; }
     if (name == "show_mesh") { mScene.showMesh = value != 0; return true; }
     if (name == "show_slice") { mScene.showSlice = value != 0; return true; }

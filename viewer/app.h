@@ -111,7 +111,8 @@ public:
     std::string stateJson() const;
     /// Sets a model parameter by name (iso, delta, zeta, mu_scale, riemannian, inflation, umbrella,
     /// curvature, gradient) or a display setting (colour: 0 shaded, 1 metric edge length, 2 local
-    /// resolution; wireframe, show_mesh, show_slice: 0/1; slice_axis: 0..2; slice_position: 0..1) as
+    /// resolution; wireframe, show_mesh, show_slice: 0/1; slice_axis: 0..2; slice_position: 0..1;
+    /// camera_yaw: radians) as
     /// if changed in the UI; false for an unknown name.
     bool setParameter(const std::string& name, double value);
 

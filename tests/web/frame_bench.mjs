@@ -7,7 +7,7 @@
 //     costs the GPU process;
 //   - frame interval: the time between the page's animation frames (requestAnimationFrame timestamps
 //     over a few seconds; median, mean, 90th percentile) paused (an unchanged image is not drawn
-//     again), paused while the camera orbits (a mouse drag: every frame draws the scene) and while
+//     again), paused while the camera orbits (its yaw changes every frame: every frame draws) and while
 //     evolving (every frame runs an evolution step, rebuilds the geometry and draws), and the
 //     viewer's own main-thread time per frame (model + UI, "cpuMs" of riemesh.state()).
 // Prints figures; asserts nothing (speed targets live in benchmarks, not tests). The machine's load
@@ -66,8 +66,8 @@ try {
   };
   // Animation-frame intervals over `ms` (requestAnimationFrame runs beside the page's own main loop),
   // with the viewer's main-thread time per frame sampled on the way; `during` runs each frame (JS).
-  const frames = async (ms, keepEvolving) => {
-    const r = await page.evaluate(({ ms, keepEvolving }) => new Promise((resolve) => {
+  const frames = async (ms, keepEvolving, spin = false) => {
+    const r = await page.evaluate(({ ms, keepEvolving, spin }) => new Promise((resolve) => {
       const stamps = [], cpu = [], vertices = [];
       const first = window.riemesh.state().iteration;
       const tick = (t) => {
@@ -77,11 +77,12 @@ try {
         vertices.push(s.vertices);
         // Keep the model moving: setting a parameter clears a convergence (the mesh evolves again).
         if (keepEvolving && s.state !== 'evolving') window.riemesh.set('inflation', 1.0);
+        if (spin) window.riemesh.set('camera_yaw', -1.1 + 0.3 * Math.sin(0.01 * stamps.length));
         if (t - stamps[0] < ms) requestAnimationFrame(tick);
         else resolve({ stamps, cpu, vertices, iterations: s.iteration - first });
       };
       requestAnimationFrame(tick);
-    }), { ms, keepEvolving });
+    }), { ms, keepEvolving, spin });
     const dt = r.stamps.slice(1).map((t, i) => t - r.stamps[i]);
     dt.sort((a, b) => a - b);
     return {
@@ -90,24 +91,9 @@ try {
       vmin: Math.min(...r.vertices), vmax: Math.max(...r.vertices),
     };
   };
-  // The same while the camera orbits (a left-drag over the view, right of the UI panel): every
-  // frame then draws the whole scene.
-  const orbit = async (ms) => {
-    await page.mouse.move(900, 420);
-    await page.mouse.down();
-    const result = frames(ms, false);
-    const end = Date.now() + ms;
-    let x = 900, step = 4;
-    while (Date.now() < end) {
-      x += step;
-      if (x > 1000 || x < 800) step = -step;
-      await page.mouse.move(x, 420);
-      await sleep(5);
-    }
-    const r = await result;
-    await page.mouse.up();
-    return r;
-  };
+  // The same while the camera orbits: its yaw swings about the home view and changes every animation
+  // frame (a mouse drag at full rate), so every frame draws the whole scene.
+  const orbit = (ms) => frames(ms, false, true);
   const report = (label, s, draw, drawWire, paused, orbiting, evolving) => {
     console.log(`frame_bench: ${label}: ${s.vertices} vertices, ${s.iteration} iterations (${s.state})`);
     console.log(`frame_bench:   draw ${fmt(draw)} ms, with the wireframe ${fmt(drawWire)} ms (mean of 20 waited-for renders, median of ${rounds})`);
