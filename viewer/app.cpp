@@ -397,7 +397,7 @@ void App::rebuildMeshGeometry()
 {
     // One pass over the faces (triangles, area-weighted normals, cross-section) and one over the edges
     // (edge lengths for the colour), instead of circulating around every vertex: the same values as
-    // vertexNormal() and the per-vertex means of before, for a fraction of the time (12 -> ~3 ms per
+    // vertexNormal() and the per-vertex means of before, for a fraction of the time (12 -> 4.5 ms per
     // rebuild at 20k vertices in WebAssembly), which matters since it runs every frame while evolving.
     Scene& s = mScene;
     const std::size_t nv = mMesh.n_vertices();
