@@ -94,6 +94,10 @@ public:
     /// Runs without UI until the evolution stops (native `--headless`); returns the final stats line.
     std::string runToConvergence();
 
+    /// A key went down (GLFW key code: 'F' frames the mesh, 'H' homes the camera, ' ' plays/pauses),
+    /// handled by the next frame() unless ImGui has the keyboard.
+    void keyPressed(int key) { mPendingKeys.push_back(key); }
+
     const Scene& scene() const { return mScene; }
     bool playing() const { return mPlaying; }
     void setPlaying(bool playing) { mPlaying = playing; }
@@ -102,10 +106,14 @@ public:
     const std::string& statusMessage() const { return mMessage; }
 
     /// The state as JSON (the page's JS API and tests): iteration, vertices, components, genus,
-    /// playing, state ("evolving", "paused", "converged", ...), computeSeconds, volume.
+    /// playing, state ("evolving", "paused", "converged", ...), computeSeconds, frameMs (frame interval,
+    /// smoothed), cpuMs (the last frame's model + UI time on the main thread), volume.
     std::string stateJson() const;
     /// Sets a model parameter by name (iso, delta, zeta, mu_scale, riemannian, inflation, umbrella,
-    /// curvature, gradient) as if changed in the UI; false for an unknown name.
+    /// curvature, gradient) or a display setting (colour: 0 shaded, 1 metric edge length, 2 local
+    /// resolution; wireframe, show_mesh, show_slice: 0/1; slice_axis: 0..2; slice_position: 0..1;
+    /// camera_yaw: radians) as
+    /// if changed in the UI; false for an unknown name.
     bool setParameter(const std::string& name, double value);
 
 private:
@@ -125,6 +133,7 @@ private:
     double mComputeSeconds = 0;
     double mWallStart = 0;
     MeshTopology mTopology;
+    int mTopologyEvents = 0, mTopologyCountdown = 0; ///< see updateTopology()
     int mMerges = 0, mCuts = 0;
     int mIterationBase = 0;            ///< iterations of previous Evolution objects (metric changes)
     int mIteration = 0;
@@ -133,16 +142,25 @@ private:
     float mHistogramMax = 0;
     // display
     Scene mScene;
+    // rebuildMeshGeometry()'s per-vertex work arrays, kept to reuse their memory
+    std::vector<Vec3> mScratchPositions, mScratchNormals;
+    std::vector<Mat3> mScratchMetric;
+    std::vector<double> mScratchValues;
+    std::vector<int> mScratchCounts;
+    std::vector<std::uint32_t> mScratchIndex;
     ColourMode mColour = ColourMode::MetricEdgeLength;
     int mSliceAxis = 2;
     float mSlicePosition = 0.5f;       ///< fraction of the bounds along the axis
     float mWindow = 1.f, mLevel = 0.5f;
     bool mSliceDirty = true, mMeshDirty = true;
+    bool mGeometryAtRest = false; ///< the scene's mesh was built while the model was not evolving
     int mStatsCountdown = 0;
+    std::vector<int> mPendingKeys;
     std::string mMessage;
     std::optional<std::string> mDownload;
     double mLastFrameMs = 0;
     double mLastFrameStart = 0, mFrameInterval = 0; ///< seconds, smoothed
+    double mShownAt = -1, mShownIntervalMs = 0, mShownFrameMs = 0; ///< the figures the panel shows
 
     void installVolume(std::unique_ptr<NanoVolume> volume, std::unique_ptr<ScalarImage> image,
                        std::unique_ptr<MetricField> metric, const std::string& name);
@@ -155,6 +173,7 @@ private:
     void handleCameraInput(int width, int height);
     void rebuildMeshGeometry();
     void rebuildSlice();
+    void updateTopology();
     void updateStatistics();
     void drawPanels();
     void applyParameters(bool metricChanged);

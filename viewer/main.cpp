@@ -17,8 +17,10 @@
 #include <emscripten/html5.h>
 #endif
 
+#include <cstdint>
 #include <cstdio>
 #include <cstdlib>
+#include <cstring>
 #include <exception>
 #include <fstream>
 #include <memory>
@@ -34,6 +36,7 @@ struct Viewer {
     GLFWwindow* window = nullptr;
     App app;
     std::unique_ptr<Renderer> renderer;
+    std::uint64_t shown = 0; ///< frameSignature() of the image on the canvas (web; 0: none)
 };
 Viewer* gViewer = nullptr;
 
@@ -50,6 +53,12 @@ bool fileExists(const std::string& path) { return !path.empty() && std::ifstream
 void onDrop(GLFWwindow*, int count, const char** paths)
 {
     if (count > 0 && gViewer) gViewer->app.loadVolume(paths[count - 1]);
+}
+
+void onKey(GLFWwindow*, int key, int, int action, int)
+{
+    // Chained by the ImGui GLFW backend (installed before it), which then records the key itself.
+    if (action == GLFW_PRESS && gViewer) gViewer->app.keyPressed(key);
 }
 
 void offerDownload(const std::string& path)
@@ -75,6 +84,54 @@ void offerDownload(const std::string& path)
 #endif
 }
 
+#ifdef __EMSCRIPTEN__
+/// A 64-bit hash of everything the next image would show: the scene's inputs (mesh and slice
+/// versions, camera, display flags, size) and ImGui's draw lists (vertices, indices, commands).
+std::uint64_t frameSignature(const riemesh::viewer::Scene& scene, const ImDrawData* ui, int width, int height)
+{
+    std::uint64_t h = 0x9e3779b97f4a7c15ull;
+    auto mix = [&h](const void* data, std::size_t bytes) {
+        const auto* p = static_cast<const unsigned char*>(data);
+        std::uint64_t word = 0;
+        for (; bytes >= 8; bytes -= 8, p += 8) {
+            std::memcpy(&word, p, 8);
+            h = (h ^ word) * 0xff51afd7ed558ccdull;
+            h ^= h >> 32;
+        }
+        word = 0;
+        std::memcpy(&word, p, bytes);
+        h = (h ^ word ^ (std::uint64_t(bytes) << 56)) * 0xc4ceb9fe1a85ec53ull;
+        h ^= h >> 29;
+    };
+    const auto& c = scene.camera;
+    const float camera[] = {c.target.x(), c.target.y(), c.target.z(), c.yaw, c.pitch, c.distance, c.fovY,
+                            scene.background.x(), scene.background.y(), scene.background.z()};
+    const std::uint64_t other[] = {scene.meshVersion, scene.sliceVersion,
+                                   std::uint64_t(scene.showMesh) | std::uint64_t(scene.wireframe) << 1 |
+                                       std::uint64_t(scene.showSlice) << 2,
+                                   std::uint64_t(std::uint32_t(width)) << 32 | std::uint32_t(height)};
+    mix(camera, sizeof camera);
+    mix(other, sizeof other);
+    if (!ui || !ui->Valid) return h ^ 1;
+    const float display[] = {ui->DisplayPos.x, ui->DisplayPos.y, ui->DisplaySize.x, ui->DisplaySize.y,
+                             ui->FramebufferScale.x, ui->FramebufferScale.y};
+    mix(display, sizeof display);
+    for (int i = 0; i < ui->CmdListsCount; ++i) {
+        const ImDrawList* list = ui->CmdLists[i];
+        mix(list->VtxBuffer.Data, std::size_t(list->VtxBuffer.Size) * sizeof(ImDrawVert));
+        mix(list->IdxBuffer.Data, std::size_t(list->IdxBuffer.Size) * sizeof(ImDrawIdx));
+        for (const ImDrawCmd& cmd : list->CmdBuffer) {
+            const std::uint64_t fields[] = {std::uint64_t(reinterpret_cast<std::uintptr_t>(cmd.TextureId)),
+                                            cmd.VtxOffset, cmd.IdxOffset, cmd.ElemCount,
+                                            std::uint64_t(reinterpret_cast<std::uintptr_t>(cmd.UserCallback))};
+            mix(&cmd.ClipRect, sizeof cmd.ClipRect);
+            mix(fields, sizeof fields);
+        }
+    }
+    return h == 0 ? 1 : h;
+}
+#endif
+
 void frame()
 {
     Viewer& v = *gViewer;
@@ -97,9 +154,22 @@ void frame()
     v.app.frame(25.0, width, height); // at most ~25 ms of evolution per frame: the UI never freezes
     ImGui::Render();
 
-    v.renderer->draw(v.app.scene(), width, height);
-    ImGui_ImplOpenGL3_RenderDrawData(ImGui::GetDrawData());
-    glfwSwapBuffers(v.window);
+#ifdef __EMSCRIPTEN__
+    // A frame that would show the same image as the canvas does is not drawn: the browser keeps
+    // showing the last one (it presents a WebGL canvas only when it was drawn to). An idle viewer
+    // then costs its UI logic only, whatever the size of the mesh; anything that changes the image
+    // (camera, mesh, slice, display, the UI's text or hover state) draws the whole frame.
+    const std::uint64_t signature = frameSignature(v.app.scene(), ImGui::GetDrawData(), width, height);
+    const bool draw = signature != v.shown;
+    v.shown = signature;
+#else
+    const bool draw = true;
+#endif
+    if (draw) {
+        v.renderer->draw(v.app.scene(), width, height);
+        ImGui_ImplOpenGL3_RenderDrawData(ImGui::GetDrawData());
+        glfwSwapBuffers(v.window);
+    }
 
     if (auto path = v.app.takeDownload()) offerDownload(*path);
 }
@@ -144,6 +214,7 @@ EMSCRIPTEN_KEEPALIVE double riemesh_time_draw(int count)
         v.renderer->draw(v.app.scene(), width, height);
         v.renderer->finish();
     }
+    gViewer->shown = 0; // the canvas now shows the scene without the UI: the next frame draws
     return (emscripten_get_now() - start) / count;
 }
 }
@@ -193,6 +264,7 @@ int run(int argc, char** argv)
     glfwMakeContextCurrent(v.window);
     glfwSwapInterval(1);
     glfwSetDropCallback(v.window, onDrop);
+    glfwSetKeyCallback(v.window, onKey); // before ImGui_ImplGlfw_InitForOpenGL, which chains it
 
     IMGUI_CHECKVERSION();
     ImGui::CreateContext();
