@@ -527,8 +527,22 @@ TEST_CASE("stress regressions: cases the soak broke stay valid and embedded")
     // (kMergedProperty) and by holding apart the sheets in contact that are not merged
     // (kHoldProperty).
     // (833718140080444770 from the same soak no longer breaks but still ends tangled: not listed.)
-    for (std::uint64_t seed : {12291501983830112541ull, 14864462764286680675ull, 8722947093428365254ull}) {
+    // makeCase draws several numbers per argument list, whose evaluation order is up to the
+    // compiler: a seed makes another case under clang (WebAssembly) than under GCC. Each seed is
+    // checked where it makes the case the soak found (the first part's centre tells).
+    const std::pair<std::uint64_t, const char*> cases[] = {
+        {12291501983830112541ull, "[torus c=( 7.8985 3.97237 3.07016)"},
+        {14864462764286680675ull, "[ball c=(-3.44249  7.06184 -4.38536)"},
+        {8722947093428365254ull, "[ball c=( 1.74289 -6.30578  5.21372)"}};
+    int checked = 0;
+    for (const auto& entry : cases) { // not a structured binding: clang's C++17 cannot capture one
+        const std::uint64_t seed = entry.first;
         const StressCase c = makeCase(seed);
+        if (c.describe().find(entry.second) == std::string::npos) {
+            MESSAGE("case seed " << seed << " makes another case with this compiler: skipped");
+            continue;
+        }
+        ++checked;
         const RunResult r = runCase(c);
         INFO(c.describe());
         INFO(r.failure);
@@ -536,4 +550,5 @@ TEST_CASE("stress regressions: cases the soak broke stay valid and embedded")
         CHECK(r.failure.empty());
         CHECK(r.embedding.empty());
     }
+    MESSAGE(checked << " of 3 regression cases reproduced with this compiler");
 }
