@@ -86,19 +86,19 @@ IterationStats Evolution::step()
         ts = resolveTopology(mMesh, collisions, rs.tunnels, to);
     }
     if (!ts.unresolved.empty() || !contacts.empty()) { // before garbage collection: handles valid
-        OpenMesh::VPropHandleT<Vec3> hold;
-        if (!mMesh.get_property_handle(hold, kHoldProperty)) {
-            mMesh.add_property(hold, kHoldProperty);
-            for (auto v : mMesh.all_vertices()) mMesh.property(hold, v) = Vec3::Zero();
-        }
+        OpenMesh::VPropHandleT<Hold> hold;
+        if (!mMesh.get_property_handle(hold, kHoldProperty)) mMesh.add_property(hold, kHoldProperty);
         for (const auto* pairs : {&ts.unresolved, &contacts})
             for (const CollisionPair& c : *pairs) {
                 if (mMesh.status(c.u).deleted() || mMesh.status(c.w).deleted()) continue;
                 const Vec3 e = position(mMesh, c.w) - position(mMesh, c.u);
                 const double len = e.norm();
                 if (!(len > 0)) continue;
-                mMesh.property(hold, c.u) += e / len;
-                mMesh.property(hold, c.w) -= e / len;
+                const Vec3 n = e / len;
+                Hold& hu = mMesh.property(hold, c.u);
+                Hold& hw = mMesh.property(hold, c.w);
+                hu.x += n.x(), hu.y += n.y(), hu.z += n.z();
+                hw.x -= n.x(), hw.y -= n.y(), hw.z -= n.z();
             }
     }
     OpenMesh::VPropHandleT<char> mergeZone; // fresh-merge zones last kMergeZoneIterations

@@ -11,7 +11,7 @@ IntegrationStats integrate(Mesh& mesh, const std::vector<Vec3>& forces, const In
     const auto velocity = velocityProperty(mesh);
     OpenMesh::VPropHandleT<Drift> drift;
     if (!mesh.get_property_handle(drift, kDriftProperty)) mesh.add_property(drift, kDriftProperty);
-    OpenMesh::VPropHandleT<Vec3> hold;
+    OpenMesh::VPropHandleT<Hold> hold;
     const bool holding = mesh.get_property_handle(hold, kHoldProperty);
     const double keep = options.driftDecay;
     const double dt = options.timeStep;
@@ -31,7 +31,8 @@ IntegrationStats integrate(Mesh& mesh, const std::vector<Vec3>& forces, const In
             u = d / dt;
         }
         if (holding) {
-            Vec3& toward = mesh.property(hold, v);
+            Hold& h = mesh.property(hold, v);
+            const Vec3 toward(h.x, h.y, h.z);
             const double norm = toward.norm();
             if (norm > 0) {
                 const Vec3 n = toward / norm;
@@ -40,7 +41,7 @@ IntegrationStats integrate(Mesh& mesh, const std::vector<Vec3>& forces, const In
                     d -= along * n;
                     u -= std::max(0.0, u.dot(n)) * n;
                 }
-                toward.setZero();
+                h = Hold{};
             }
         }
         if (!std::isfinite(d.x()) || !std::isfinite(d.y()) || !std::isfinite(d.z())) {

@@ -30,13 +30,18 @@ struct Drift {
 };
 inline constexpr const char* kDriftProperty = "riemesh:drift";
 
-/// Per-vertex contact (Vec3d, zero = none): the sum of unit directions from the vertex toward
+/// Per-vertex contact (Hold, zero = none): the sum of unit directions from the vertex toward
 /// the vertices it must not approach this iteration. Evolution sets it for the collision pairs the
 /// topology step could not merge and for the sheets in contact that collision detection does not
 /// merge (findCollisions' contacts): paper 3.2 assumes every detected pair is merged at once, and
 /// its radius lambda zeta delta only guarantees a crossing is seen, not that it is handled. The
 /// next integrate() removes the part of the vertex's displacement (and velocity) along that
 /// direction, so the sheets may slide but not close in, and clears it.
+/// Zero for new vertices (the type's constructor), like Drift: a plain Vec3d property entry added
+/// by a split would hold an uninitialised direction.
+struct Hold {
+    double x = 0, y = 0, z = 0;
+};
 inline constexpr const char* kHoldProperty = "riemesh:contact";
 
 /// Updates velocities (the mesh's velocity property) and positions from `forces` (indexed by
