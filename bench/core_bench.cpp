@@ -118,7 +118,8 @@ double now()
 void scaling(bool quick)
 {
     std::printf("\n# cost per iteration against vertex count (ball image, Euclidean, converged sphere)\n");
-    std::printf("%10s %10s %12s %14s\n", "target", "vertices", "ms/iter", "us/iter/vertex");
+    std::printf("%10s %10s %12s %14s %8s %8s %8s %8s %8s\n", "target", "vertices", "ms/iter", "us/iter/vertex",
+                "forces", "integr.", "regul.", "collis.", "topol.");
     const int targets[] = {1000, 5000, 20000, 80000};
     for (int target : targets) {
         if (quick && target > 5000) break;
@@ -135,13 +136,21 @@ void scaling(bool quick)
         EvolutionOptions o;
         o.delta = delta;
         o.maxIterations = 1000000;
+        o.minIterations = 1000000; // never converged: every timed step is a full iteration
         Evolution evolution(mesh, image, metric, o);
         for (int i = 0; i < 40; ++i) evolution.step(); // settle the sampling
         const int n = 50;
+        IterationStats::Phases sum;
         const double t0 = now();
-        for (int i = 0; i < n; ++i) evolution.step();
+        for (int i = 0; i < n; ++i) {
+            const IterationStats::Phases p = evolution.step().phases;
+            sum.forces += p.forces / n, sum.integration += p.integration / n, sum.regularity += p.regularity / n;
+            sum.collisions += p.collisions / n, sum.topology += p.topology / n;
+        }
         const double ms = (now() - t0) * 1000.0 / n;
-        std::printf("%10d %10zu %12.3f %14.4f\n", target, mesh.n_vertices(), ms, 1000.0 * ms / mesh.n_vertices());
+        std::printf("%10d %10zu %12.3f %14.4f %8.2f %8.2f %8.2f %8.2f %8.2f\n", target, mesh.n_vertices(), ms,
+                    1000.0 * ms / mesh.n_vertices(), sum.forces, sum.integration, sum.regularity, sum.collisions,
+                    sum.topology);
     }
 }
 

@@ -57,21 +57,30 @@ IterationStats Evolution::step()
     IterationStats it;
     if (done()) return it;
     const auto start = std::chrono::steady_clock::now();
+    auto lap = start;
+    auto phase = [&lap](double& ms) {
+        const auto t = std::chrono::steady_clock::now();
+        ms = std::chrono::duration<double, std::milli>(t - lap).count();
+        lap = t;
+    };
     const EvolutionOptions& o = mOptions;
     const double vmax = o.vmaxFraction * o.delta;
 
     computeForces(mMesh, mImage, o.forces, o.delta, mForces, &mMetric);
+    phase(it.phases.forces);
     IntegrationOptions io;
     io.mass = o.mass;
     io.damping = o.damping;
     io.vmax = vmax;
     io.movingSpeed = 0.5 * o.forces.externalLimit * o.delta / std::max(o.damping, 1e-9); // half the terminal speed F/gamma
     const IntegrationStats is = integrate(mMesh, mForces, io);
+    phase(it.phases.integration);
 
     RegularityOptions ro;
     ro.delta = o.delta;
     ro.zeta = o.zeta;
     const RegularityStats rs = enforceRegularity(mMesh, mMetric, ro);
+    phase(it.phases.regularity);
 
     CollisionOptions co;
     co.delta = o.delta;
@@ -79,6 +88,7 @@ IterationStats Evolution::step()
     co.vmax = vmax;
     std::vector<CollisionPair> contacts;
     const auto collisions = findCollisions(mMesh, mMetric, co, &contacts);
+    phase(it.phases.collisions);
     TopologyStats ts;
     if (!collisions.empty() || !rs.tunnels.empty()) {
         TopologyOptions to;
@@ -131,7 +141,8 @@ IterationStats Evolution::step()
     it.flips = rs.flips;
     it.merges = ts.merges;
     it.cuts = ts.cuts;
-    it.milliseconds = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
+    phase(it.phases.topology);
+    it.milliseconds = std::chrono::duration<double, std::milli>(lap - start).count();
     mHistory.push_back(it);
     if (ts.merges || ts.cuts) mLastTopologyEvent = it.iteration;
 

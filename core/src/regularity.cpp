@@ -4,7 +4,10 @@
 // edges are queued as they appear), collapse the short ones (shortest first, toward the midpoint; the
 // endpoints are tried when the midpoint is refused), then one sweep of flips that lower the valence
 // deviation from 6 (or, at equal deviation, restore the Delaunay-like angle condition measured in
-// the metric). Passes repeat until one changes nothing or maxPasses is reached.
+// the metric). Passes repeat until one changes nothing or maxPasses is reached. Only the first pass
+// looks at every edge: the later ones re-examine the edges of the faces around the vertices the
+// previous pass changed (an edge away from every change keeps its length, its valences and its
+// faces, so its verdict), which keeps a call O(n + changes) however many passes it takes.
 //
 // A short edge u-v whose endpoints share an outside neighbour w is not collapsed (it would pinch
 // the loop u-v-w). If one side of that loop holds only a few vertices (a dent or pimple of the
@@ -24,6 +27,7 @@
 #include <cmath>
 #include <cstdint>
 #include <stdexcept>
+#include <tuple>
 
 namespace riemesh {
 
@@ -115,28 +119,106 @@ public:
         mLong.clear();
         mShort.clear();
         mValence.assign(mMesh.n_vertices(), 0);
-        const bool euclidean = mMetric.isEuclidean();
-        const double lo2 = mLo * mLo, hi2 = mHi * mHi;
-        const Mesh::Point* points = mMesh.points();
         const int edgeCount = int(mMesh.n_edges());
+        mClass.assign(std::size_t(edgeCount), kFits);
         for (int i = 0; i < edgeCount; ++i) {
             const EdgeHandle e(i);
             if (mMesh.status(e).deleted()) continue;
             const HalfedgeHandle h = mMesh.halfedge_handle(e, 0);
-            const int from = mMesh.from_vertex_handle(h).idx(), to = mMesh.to_vertex_handle(h).idx();
-            ++mValence[from];
-            ++mValence[to];
-            if (euclidean) {
-                const double l2 = (points[to] - points[from]).sqrnorm();
-                if (l2 > hi2) mLong.push_back({length(e), std::sqrt(l2), i});
-                else if (l2 < lo2) mShort.push_back({length(e), std::sqrt(l2), i});
-            } else {
-                const double l = length(e);
-                if (l > mHi) mLong.push_back({l, euclideanLength(e), i});
-                else if (l < mLo) mShort.push_back({l, l, i});
-            }
+            ++mValence[mMesh.from_vertex_handle(h).idx()];
+            ++mValence[mMesh.to_vertex_handle(h).idx()];
+            classify(i);
         }
-        mValenceValid = true;
+        mEdges.clear();
+        clearTouched();
+    }
+
+    /// Measures again only the edges of the faces around the vertices changed since the last
+    /// measurement (collected in mEdges for the flip sweep); the other edges keep their class.
+    /// Valences are kept up to date by the edits themselves.
+    void measureTouched()
+    {
+        mLong.clear();
+        mShort.clear();
+        mEdges.clear();
+        if (mEdgeSeen.size() < mMesh.n_edges()) mEdgeSeen.resize(mMesh.n_edges(), 0);
+        if (mClass.size() < mMesh.n_edges()) mClass.resize(mMesh.n_edges(), kFits);
+        for (const int t : mTouchedList) {
+            const VertexHandle v(t);
+            if (mMesh.status(v).deleted()) continue;
+            for (auto f = mMesh.cvf_begin(v); f.is_valid(); ++f)
+                for (auto fh = mMesh.cfh_begin(*f); fh.is_valid(); ++fh) {
+                    const int i = mMesh.edge_handle(*fh).idx();
+                    if (mEdgeSeen[std::size_t(i)]) continue;
+                    mEdgeSeen[std::size_t(i)] = 1;
+                    mEdges.push_back(i);
+                }
+        }
+        for (const int i : mEdges) {
+            mEdgeSeen[std::size_t(i)] = 0;
+            classify(i);
+        }
+        clearTouched();
+    }
+
+    /// Edges still outside [delta, zeta*delta] after measuring what changed: (too long, too short).
+    std::pair<int, int> countOutside()
+    {
+        measureTouched();
+        int tooLong = 0, tooShort = 0;
+        for (std::size_t i = 0; i < mClass.size(); ++i) {
+            if (mClass[i] == kFits || mMesh.status(EdgeHandle(int(i))).deleted()) continue;
+            (mClass[i] == kLong ? tooLong : tooShort) += 1;
+        }
+        return {tooLong, tooShort};
+    }
+
+    /// Records edge i's class and queues it when it is too long or too short.
+    void classify(int i)
+    {
+        const EdgeHandle e(i);
+        signed char& c = mClass[std::size_t(i)];
+        c = kFits;
+        if (mMetric.isEuclidean()) {
+            const HalfedgeHandle h = mMesh.halfedge_handle(e, 0);
+            const Mesh::Point* points = mMesh.points();
+            const double l2 = (points[mMesh.to_vertex_handle(h).idx()] - points[mMesh.from_vertex_handle(h).idx()]).sqrnorm();
+            if (l2 > mHi * mHi) mLong.push_back({length(e), std::sqrt(l2), i}), c = kLong;
+            else if (l2 < mLo * mLo) mShort.push_back({length(e), std::sqrt(l2), i}), c = kShort;
+        } else {
+            const double l = length(e);
+            if (l > mHi) mLong.push_back({l, euclideanLength(e), i}), c = kLong;
+            else if (l < mLo) mShort.push_back({l, l, i}), c = kShort;
+        }
+    }
+
+    /// Marks v as changed by this pass: the next pass re-examines the edges of its faces.
+    void touch(VertexHandle v)
+    {
+        const std::size_t i = std::size_t(v.idx());
+        if (i >= mTouched.size()) mTouched.resize(std::max(i + 1, std::size_t(mMesh.n_vertices())), 0);
+        if (mTouched[i]) return;
+        mTouched[i] = 1;
+        mTouchedList.push_back(int(i));
+    }
+
+    void clearTouched()
+    {
+        for (const int i : mTouchedList) mTouched[std::size_t(i)] = 0;
+        mTouchedList.clear();
+    }
+
+    /// After a split or a collapse around v: recounts the valences of v and its neighbours (the
+    /// only ones an edit at v changes) and marks them changed.
+    void updateRing(VertexHandle v)
+    {
+        if (mValence.size() < mMesh.n_vertices()) mValence.resize(mMesh.n_vertices(), 0);
+        mValence[std::size_t(v.idx())] = int(mMesh.valence(v));
+        touch(v);
+        for (auto n = mMesh.cvv_begin(v); n.is_valid(); ++n) {
+            mValence[std::size_t(n->idx())] = int(mMesh.valence(*n));
+            touch(*n);
+        }
     }
 
     /// Splits long edges at their midpoints until none is left (or a safety cap). Among the edges
@@ -163,7 +245,7 @@ public:
             const VertexHandle w = split(mMesh, e, mid);
             if (!w.is_valid()) continue;
             ++splits;
-            mValenceValid = false;
+            updateRing(w);
             for (auto oh = mMesh.cvoh_begin(w); oh.is_valid(); ++oh) {
                 const EdgeHandle ne = mMesh.edge_handle(*oh);
                 const double l = length(ne);
@@ -194,21 +276,13 @@ public:
         return mCollapses;
     }
 
-    /// One sweep of flips over every edge.
-    int flipEdges()
+    /// One sweep of flips over every edge (all = true) or over the edges of the last measureTouched().
+    int flipEdges(bool all)
     {
-        if (!mValenceValid) { // splits or collapses since measure()
-            mValence.assign(mMesh.n_vertices(), 0);
-            for (auto e : mMesh.edges()) {
-                const HalfedgeHandle h = mMesh.halfedge_handle(e, 0);
-                ++mValence[mMesh.from_vertex_handle(h).idx()];
-                ++mValence[mMesh.to_vertex_handle(h).idx()];
-            }
-            mValenceValid = true;
-        }
         int flips = 0;
-        const int edgeCount = int(mMesh.n_edges());
-        for (int i = 0; i < edgeCount; ++i) {
+        const int edgeCount = all ? int(mMesh.n_edges()) : int(mEdges.size());
+        for (int k = 0; k < edgeCount; ++k) {
+            const int i = all ? k : mEdges[std::size_t(k)];
             const EdgeHandle e(i);
             if (mMesh.status(e).deleted()) continue;
             const HalfedgeHandle h = mMesh.halfedge_handle(e, 0), o = mMesh.halfedge_handle(e, 1);
@@ -241,6 +315,7 @@ public:
             ++va;
             ++vb;
             ++flips;
+            touch(u), touch(v), touch(a), touch(b);
         }
         return flips;
     }
@@ -314,7 +389,7 @@ private:
         const VertexHandle kept = detail::collapseUnchecked(mMesh, hh, target);
         forgetMetric(kept);
         ++mCollapses;
-        mValenceValid = false;
+        updateRing(kept);
         for (auto oh = mMesh.cvoh_begin(kept); oh.is_valid(); ++oh) {
             const EdgeHandle ne = mMesh.edge_handle(*oh);
             const double l = length(ne);
@@ -441,10 +516,15 @@ private:
     double mLo; ///< delta (metric length)
     double mHi; ///< zeta * delta (metric length)
     std::vector<QueuedEdge> mLong, mShort;
-    std::vector<int> mValence; ///< by vertex idx(), kept up to date during the flip sweep
+    std::vector<int> mValence; ///< by vertex idx(), kept up to date by every edit
     mutable std::vector<Mat3> mG;       ///< G at each vertex (see vertexMetric), by vertex idx()
     mutable std::vector<char> mHaveG;   ///< mG[i] is up to date
-    bool mValenceValid = false; ///< mValence matches the mesh (no split or collapse since it was counted)
+    static constexpr signed char kFits = 0, kLong = 1, kShort = -1;
+    std::vector<signed char> mClass;  ///< by edge idx(): the class of its last measurement
+    std::vector<char> mTouched;       ///< by vertex idx(): changed since the last measurement
+    std::vector<int> mTouchedList;    ///< the vertices marked in mTouched
+    std::vector<int> mEdges;          ///< the edges re-measured by measureTouched()
+    std::vector<char> mEdgeSeen;      ///< by edge idx(): scratch of measureTouched()
     int mCollapses = 0;             ///< collapses of the current collapse stage
     std::vector<VertexHandle> mCap; ///< the vertices of a small cap being dissolved
 };
@@ -457,12 +537,11 @@ RegularityStats enforceRegularity(Mesh& mesh, const MetricField& metric, const R
     if (!(options.zeta > 1.0)) throw std::invalid_argument("enforceRegularity: zeta must be > 1");
     RegularityStats stats;
     Regularizer regularizer(mesh, metric, options, stats);
-    bool counted = false;
     for (int pass = 0; pass < options.maxPasses; ++pass) {
-        regularizer.measure();
-        const int longBefore = regularizer.longCount(), shortBefore = regularizer.shortCount();
+        if (pass == 0) regularizer.measure();
+        else regularizer.measureTouched();
         int changes = 0;
-        if (longBefore > 0) {
+        if (regularizer.longCount() > 0) {
             const int n = regularizer.splitLongEdges();
             stats.splits += n;
             changes += n;
@@ -473,23 +552,13 @@ RegularityStats enforceRegularity(Mesh& mesh, const MetricField& metric, const R
             changes += n;
         }
         if (options.flips) {
-            const int n = regularizer.flipEdges();
+            const int n = regularizer.flipEdges(pass == 0);
             stats.flips += n;
             changes += n;
         }
-        if (changes == 0) {
-            // Nothing moved since the measurement: its counts are the final ones.
-            stats.tooLong = longBefore;
-            stats.tooShort = shortBefore;
-            counted = true;
-            break;
-        }
+        if (changes == 0) break;
     }
-    if (!counted) {
-        regularizer.measure();
-        stats.tooLong = regularizer.longCount();
-        stats.tooShort = regularizer.shortCount();
-    }
+    std::tie(stats.tooLong, stats.tooShort) = regularizer.countOutside();
     regularizer.pruneTunnels();
     return stats;
 }

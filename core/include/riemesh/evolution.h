@@ -26,6 +26,11 @@ struct IterationStats {
     int splits = 0, collapses = 0, flips = 0, merges = 0, cuts = 0;
     int removedComponents = 0; ///< specks left by cuts and deleted (see removeSmallComponents)
     double milliseconds = 0;
+    /// Where the milliseconds went: forces, integration, regularity (paper 3.1), collision
+    /// detection (3.2), topology changes and housekeeping (holds, specks, compaction).
+    struct Phases {
+        double forces = 0, integration = 0, regularity = 0, collisions = 0, topology = 0;
+    } phases;
 };
 
 enum class StopReason { Running, Converged, IterationCap, Interrupted, VertexCap };
