@@ -66,6 +66,10 @@ IterationStats Evolution::step()
     const EvolutionOptions& o = mOptions;
     const double vmax = o.vmaxFraction * o.delta;
 
+    // G at every vertex once per position: the samples taken after the last integration serve the
+    // regularity step and now the forces (only vertices created or moved since are sampled here).
+    VertexMetrics vertexMetrics(mMesh, mMetric);
+    vertexMetrics.update();
     computeForces(mMesh, mImage, o.forces, o.delta, mForces, &mMetric);
     phase(it.phases.forces);
     IntegrationOptions io;
@@ -74,6 +78,7 @@ IterationStats Evolution::step()
     io.vmax = vmax;
     io.movingSpeed = 0.5 * o.forces.externalLimit * o.delta / std::max(o.damping, 1e-9); // half the terminal speed F/gamma
     const IntegrationStats is = integrate(mMesh, mForces, io);
+    vertexMetrics.update(); // every vertex that moved
     phase(it.phases.integration);
 
     RegularityOptions ro;

@@ -27,7 +27,8 @@ void computeForces(const Mesh& mesh, const ScalarImage& image, const ForceOption
     const bool riemannian = metric && !metric->isEuclidean();
     if (riemannian) {
         tensor.resize(n);
-        for (auto v : mesh.vertices()) tensor[v.idx()] = metric->at(position(mesh, v));
+        const VertexMetrics g(mesh, *metric); // the cache Evolution keeps, when there is one
+        for (auto v : mesh.vertices()) tensor[v.idx()] = g.at(v);
     }
     for (auto f : mesh.faces()) {
         auto h0 = mesh.halfedge_handle(f);

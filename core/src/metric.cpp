@@ -27,6 +27,48 @@ double metricLength(const MetricField& metric, const Mesh& mesh, EdgeHandle e)
     return metricLength(metric.at(u), metric.at(v), d);
 }
 
+VertexMetrics::VertexMetrics(const Mesh& mesh, const MetricField& metric) : mMesh(mesh), mMetric(metric)
+{
+    if (!metric.isEuclidean()) mHasCache = mesh.get_property_handle(mCache, kMetricCacheProperty);
+}
+
+VertexMetrics::VertexMetrics(Mesh& mesh, const MetricField& metric) : mMesh(mesh), mWritable(&mesh), mMetric(metric)
+{
+    if (metric.isEuclidean()) return;
+    if (!mesh.get_property_handle(mCache, kMetricCacheProperty)) mesh.add_property(mCache, kMetricCacheProperty);
+    mHasCache = true;
+}
+
+Mat3 VertexMetrics::at(VertexHandle v) const
+{
+    if (mMetric.isEuclidean()) return Mat3::Identity();
+    const Mesh::Point& p = mMesh.point(v);
+    if (!mHasCache) return mMetric.at(toVec3(p));
+    if (const VertexMetric& cached = mMesh.property(mCache, v); cached.at == p) return cached.g;
+    const Mat3 g = mMetric.at(toVec3(p));
+    if (mWritable) {
+        VertexMetric& entry = mWritable->property(mCache, v);
+        entry.g = g;
+        entry.at = p;
+    }
+    return g;
+}
+
+std::size_t VertexMetrics::update()
+{
+    if (!mWritable || !mHasCache) return 0;
+    std::size_t sampled = 0;
+    for (auto v : mMesh.vertices()) {
+        VertexMetric& entry = mWritable->property(mCache, v);
+        const Mesh::Point& p = mMesh.point(v);
+        if (entry.at == p) continue;
+        entry.g = mMetric.at(toVec3(p));
+        entry.at = p;
+        ++sampled;
+    }
+    return sampled;
+}
+
 ConstantMetric::ConstantMetric(const Mat3& g) : mG(g)
 {
     if (!g.isApprox(g.transpose(), 1e-9)) throw std::invalid_argument("ConstantMetric: G is not symmetric");

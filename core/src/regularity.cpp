@@ -59,7 +59,7 @@ bool shorterFirst(const QueuedEdge& x, const QueuedEdge& y) { return x.priority 
 class Regularizer {
 public:
     Regularizer(Mesh& mesh, const MetricField& metric, const RegularityOptions& options, RegularityStats& stats)
-        : mMesh(mesh), mMetric(metric), mStats(stats), mLo(options.delta),
+        : mMesh(mesh), mMetric(metric), mVertexMetrics(mesh, metric), mStats(stats), mLo(options.delta),
           mHi(options.zeta * options.delta)
     {
     }
@@ -78,9 +78,9 @@ public:
         return lengthBetween(mMesh.from_vertex_handle(h), mMesh.to_vertex_handle(h));
     }
 
-    /// G at vertex v, sampled once per call and cached by vertex index (a collapse that moves the
-    /// kept vertex forgets it). Sampling a metric grid costs two trilinear lookups; edges are measured
-    /// many times per call, vertices move only through collapses.
+    /// G at vertex v, read once per call (from the mesh's VertexMetrics cache, sampled when the
+    /// vertex moved) and kept by vertex index (a collapse that moves the kept vertex forgets it):
+    /// edges are measured many times per call, vertices move only through collapses.
     Mat3 vertexMetric(VertexHandle v) const // by value: a later call may grow the cache
     {
         const std::size_t i = std::size_t(v.idx());
@@ -89,7 +89,7 @@ public:
             mG.resize(mMesh.n_vertices());
         }
         if (!mHaveG[i]) {
-            mG[i] = mMetric.at(position(mMesh, v));
+            mG[i] = mVertexMetrics.at(v);
             mHaveG[i] = 1;
         }
         return mG[i];
@@ -512,6 +512,7 @@ private:
 
     Mesh& mMesh;
     const MetricField& mMetric;
+    VertexMetrics mVertexMetrics;
     RegularityStats& mStats;
     double mLo; ///< delta (metric length)
     double mHi; ///< zeta * delta (metric length)

@@ -47,6 +47,44 @@ double metricLength(const MetricField& metric, const Vec3& u, const Vec3& v);
 /// instead of once per edge measurement.
 double metricLength(const MetricField& metric, const Mesh& mesh, EdgeHandle e);
 
+/// Name of the per-vertex cache of G (VertexMetric), kept by VertexMetrics.
+inline constexpr const char* kMetricCacheProperty = "riemesh:metric";
+
+/// G at a vertex and the position it was sampled at: the entry is current only while the vertex
+/// stays there (a new vertex has a NaN position, equal to none).
+struct VertexMetric {
+    Mat3 g = Mat3::Identity();
+    Mesh::Point at{std::nan(""), std::nan(""), std::nan("")};
+};
+
+/// G at the mesh's vertices, sampled once per vertex position. Sampling a metric grid (two
+/// trilinear lookups) is the costliest per-vertex read of an iteration, and the forces, the
+/// regularity step and the next iteration's forces need G at the same positions: the samples live
+/// in a vertex property (kMetricCacheProperty) that follows vertices through edits and garbage
+/// collection, and an entry is used only while its vertex has not moved. With a Euclidean metric
+/// nothing is stored and every call returns I.
+class VertexMetrics {
+public:
+    /// Reads `mesh`'s cache if it has one (a vertex without a current entry is sampled each call).
+    VertexMetrics(const Mesh& mesh, const MetricField& metric);
+    /// Reads and fills `mesh`'s cache (created on first use).
+    VertexMetrics(Mesh& mesh, const MetricField& metric);
+
+    /// G at vertex v's current position.
+    Mat3 at(VertexHandle v) const;
+    /// Samples every vertex whose entry is not current; returns how many were sampled.
+    std::size_t update();
+
+    const MetricField& field() const { return mMetric; }
+
+private:
+    const Mesh& mMesh;
+    Mesh* mWritable = nullptr;
+    const MetricField& mMetric;
+    OpenMesh::VPropHandleT<VertexMetric> mCache;
+    bool mHasCache = false;
+};
+
 /// G = I.
 class EuclideanMetric final : public MetricField {
 public:
