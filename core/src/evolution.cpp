@@ -42,6 +42,8 @@ Evolution::Evolution(Mesh& mesh, const ScalarImage& image, const MetricField& me
 {
     validate(mOptions);
     prepareMesh(mMesh);
+    OpenMesh::VPropHandleT<char> mergeZone; // zones left by an earlier run count down from the start
+    if (mMesh.get_property_handle(mergeZone, kMergedProperty)) mLastMerge = 1;
 }
 
 void Evolution::setOptions(const EvolutionOptions& options)
@@ -116,12 +118,16 @@ IterationStats Evolution::step()
                 hw.x -= n.x(), hw.y -= n.y(), hw.z -= n.z();
             }
     }
-    OpenMesh::VPropHandleT<char> mergeZone; // fresh-merge zones last kMergeZoneIterations
-    if (mMesh.get_property_handle(mergeZone, kMergedProperty))
-        for (auto v : mMesh.vertices())
-            if (char& left = mMesh.property(mergeZone, v); left > 0) --left;
     const int iteration = int(mHistory.size()) + 1;
     if (ts.cuts) mLastCut = iteration;
+    if (ts.merges) mLastMerge = iteration;
+    // Fresh-merge zones last kMergeZoneIterations: count them down (an O(n) pass, only while one may
+    // still be alive).
+    OpenMesh::VPropHandleT<char> mergeZone;
+    if (mLastMerge > 0 && iteration - mLastMerge <= kMergeZoneIterations &&
+        mMesh.get_property_handle(mergeZone, kMergedProperty))
+        for (auto v : mMesh.vertices())
+            if (char& left = mMesh.property(mergeZone, v); left > 0) --left;
     // Specks cut off from the surface have nothing to hold on to and shrink into degenerate faces:
     // remove components smaller than a few delta-sized triangles. Specks come only from cuts, so the
     // O(n) component pass runs only for a while after one.

@@ -91,7 +91,8 @@ private:
     std::vector<Vec3> mForces;
     StopReason mReason = StopReason::Running;
     int mLastTopologyEvent = 0;
-    int mLastCut = 0;
+    int mLastCut = 0;   ///< iteration of the last tunnel cut (0: none)
+    int mLastMerge = 0; ///< iteration of the last merge (0: none)
     void updateConvergence();
 };
 
