@@ -42,6 +42,7 @@ Evolution::Evolution(Mesh& mesh, const ScalarImage& image, const MetricField& me
 {
     validate(mOptions);
     prepareMesh(mMesh);
+    mAppended = mMesh.n_vertices(); // a given mesh's numbering is unknown: renumbered at the first step
     OpenMesh::VPropHandleT<char> mergeZone; // zones left by an earlier run count down from the start
     if (mMesh.get_property_handle(mergeZone, kMergedProperty)) mLastMerge = 1;
 }
@@ -139,8 +140,16 @@ IterationStats Evolution::step()
     // compact only once they pile up (or after a topology edit, which deletes whole one-rings).
     std::size_t live = 0;
     for (auto v : mMesh.vertices()) { (void)v; ++live; }
-    if (ts.merges || ts.cuts || removed || mMesh.n_vertices() - live > mMesh.n_vertices() / 20)
+    // Splits append vertices at the end of the arrays, so neighbours drift apart in memory and every
+    // pass of an iteration misses the cache more: once a quarter of the mesh was appended since the
+    // last time, renumber it along a space-filling curve (which compacts it as well).
+    mAppended += std::size_t(rs.splits);
+    if (o.renumber && mAppended > live / 4 + 64) {
+        reorderForLocality(mMesh);
+        mAppended = 0;
+    } else if (ts.merges || ts.cuts || removed || mMesh.n_vertices() - live > mMesh.n_vertices() / 20) {
         mMesh.garbage_collection();
+    }
 
     it.iteration = iteration;
     it.removedComponents = removed;

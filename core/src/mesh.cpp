@@ -1,5 +1,9 @@
 #include "riemesh/mesh.h"
 
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <cstdint>
 #include <vector>
 
 namespace riemesh {
@@ -12,6 +16,75 @@ OpenMesh::VPropHandleT<OpenMesh::Vec3d> velocityProperty(Mesh& mesh)
         for (auto v : mesh.all_vertices()) mesh.property(prop, v) = OpenMesh::Vec3d(0, 0, 0);
     }
     return prop;
+}
+
+namespace {
+
+/// Spreads the low 21 bits of x to every third bit (Morton interleaving).
+std::uint64_t spreadBits(std::uint64_t x)
+{
+    x &= 0x1fffff;
+    x = (x | x << 32) & 0x1f00000000ffffULL;
+    x = (x | x << 16) & 0x1f0000ff0000ffULL;
+    x = (x | x << 8) & 0x100f00f00f00f00fULL;
+    x = (x | x << 4) & 0x10c30c30c30c30c3ULL;
+    x = (x | x << 2) & 0x1249249249249249ULL;
+    return x;
+}
+
+} // namespace
+
+void reorderForLocality(Mesh& mesh)
+{
+    prepareMesh(mesh);
+    Vec3 lo = Vec3::Constant(1e300), hi = Vec3::Constant(-1e300);
+    for (auto v : mesh.vertices()) {
+        lo = lo.cwiseMin(position(mesh, v));
+        hi = hi.cwiseMax(position(mesh, v));
+    }
+    const double extent = (hi - lo).maxCoeff();
+    constexpr double kCells = double((1 << 21) - 1);
+    const double scale = extent > 0 && std::isfinite(extent) ? kCells / extent : 0.0;
+    std::vector<std::pair<std::uint64_t, int>> order; // (Morton key, old vertex index)
+    order.reserve(mesh.n_vertices());
+    for (auto v : mesh.vertices()) {
+        const Vec3 q = (position(mesh, v) - lo) * scale;
+        std::uint64_t key = 0;
+        for (int a = 0; a < 3; ++a) key |= spreadBits(std::uint64_t(std::clamp(q[a], 0.0, kCells))) << a;
+        order.push_back({key, v.idx()});
+    }
+    std::sort(order.begin(), order.end());
+    // New copies of the vertices in curve order (custom properties copied), then of the faces in
+    // the order of their first vertex; the old elements are dropped by garbage collection.
+    const std::size_t oldVertices = mesh.n_vertices(), oldEdges = mesh.n_edges(), oldFaces = mesh.n_faces();
+    std::vector<int> renamed(oldVertices, -1);
+    for (const auto& entry : order) {
+        const Mesh::Point p = mesh.point(VertexHandle(entry.second)); // a copy: add_vertex may move the array
+        const VertexHandle v = mesh.add_vertex(p);
+        mesh.copy_all_properties(VertexHandle(entry.second), v);
+        renamed[std::size_t(entry.second)] = v.idx();
+    }
+    std::vector<std::array<int, 3>> faces;
+    faces.reserve(oldFaces);
+    for (auto f : mesh.faces()) {
+        std::array<int, 3> t{};
+        int k = 0;
+        for (auto v : mesh.fv_range(f)) t[std::size_t(k++ % 3)] = renamed[std::size_t(v.idx())];
+        std::rotate(t.begin(), std::min_element(t.begin(), t.end()), t.end()); // same winding
+        faces.push_back(t);
+    }
+    std::sort(faces.begin(), faces.end());
+    // The old elements share nothing with the new ones: marking them deleted is enough.
+    for (std::size_t i = 0; i < oldVertices; ++i) mesh.status(VertexHandle(int(i))).set_deleted(true);
+    for (std::size_t i = 0; i < oldEdges; ++i) {
+        const EdgeHandle e{int(i)};
+        mesh.status(e).set_deleted(true);
+        mesh.status(mesh.halfedge_handle(e, 0)).set_deleted(true);
+        mesh.status(mesh.halfedge_handle(e, 1)).set_deleted(true);
+    }
+    for (std::size_t i = 0; i < oldFaces; ++i) mesh.status(FaceHandle(int(i))).set_deleted(true);
+    for (const auto& t : faces) mesh.add_face(VertexHandle(t[0]), VertexHandle(t[1]), VertexHandle(t[2]));
+    mesh.garbage_collection();
 }
 
 void prepareMesh(Mesh& mesh)

@@ -1,7 +1,13 @@
 #include "mesh_invariants.h"
+#include "riemesh/edge_ops.h"
 #include "riemesh/primitives.h"
 
 #include <doctest/doctest.h>
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <vector>
 
 using namespace riemesh;
 
@@ -65,4 +71,83 @@ TEST_CASE("invariants: an inside-out sphere is reported as not oriented outward"
         flipped.add_face(face);
     }
     CHECK_FALSE(testing::checkInvariants(flipped).ok());
+}
+
+namespace {
+
+/// Median |index(u) - index(v)| over the edges: how far apart in memory neighbours are.
+int medianEdgeGap(const Mesh& mesh)
+{
+    std::vector<int> gaps;
+    for (auto e : mesh.edges()) {
+        const auto h = mesh.halfedge_handle(e, 0);
+        gaps.push_back(std::abs(mesh.from_vertex_handle(h).idx() - mesh.to_vertex_handle(h).idx()));
+    }
+    std::nth_element(gaps.begin(), gaps.begin() + std::ptrdiff_t(gaps.size() / 2), gaps.end());
+    return gaps[gaps.size() / 2];
+}
+
+/// The faces as lists of positions, each from its smallest point on (same winding), sorted: the
+/// surface whatever the numbering.
+std::vector<std::array<double, 9>> surfaceOf(const Mesh& mesh)
+{
+    std::vector<std::array<double, 9>> faces;
+    for (auto f : mesh.faces()) {
+        std::array<Mesh::Point, 3> p;
+        int k = 0;
+        for (auto v : mesh.fv_range(f)) p[std::size_t(k++)] = mesh.point(v);
+        std::rotate(p.begin(), std::min_element(p.begin(), p.end()), p.end());
+        std::array<double, 9> t{};
+        for (int i = 0; i < 9; ++i) t[std::size_t(i)] = p[std::size_t(i / 3)][i % 3];
+        faces.push_back(t);
+    }
+    std::sort(faces.begin(), faces.end());
+    return faces;
+}
+
+} // namespace
+
+TEST_CASE("mesh: renumbering for locality keeps the surface, its topology and the vertex properties")
+{
+    Mesh mesh = makeIcosphere(Vec3::Zero(), 10.0, 5); // subdivision appends midpoints: neighbours far apart
+    appendMesh(mesh, makeTorus(Vec3(30, 0, 0), 6.0, 2.0, 48, 16));
+    prepareMesh(mesh);
+    // Deleted elements not yet compacted, as after a collapse in an iteration.
+    const HalfedgeHandle h = mesh.halfedge_handle(EdgeHandle(7), 0);
+    REQUIRE(collapse(mesh, h, position(mesh, mesh.to_vertex_handle(h))).is_valid());
+    REQUIRE(mesh.n_vertices() > topologyOf(mesh).vertices);
+    // Custom vertex properties, as an evolving mesh has.
+    const auto velocity = velocityProperty(mesh);
+    OpenMesh::VPropHandleT<int> tag;
+    mesh.add_property(tag, "test:tag");
+    for (auto v : mesh.vertices()) {
+        mesh.property(velocity, v) = mesh.point(v) * 0.5;
+        mesh.property(tag, v) = int(std::lround(mesh.point(v)[0] * 1000));
+    }
+    const auto before = topologyOf(mesh);
+    const auto surface = surfaceOf(mesh);
+    const double volume = signedVolume(mesh);
+    const int gapBefore = medianEdgeGap(mesh);
+
+    reorderForLocality(mesh);
+
+    REQUIRE_MESH_OK(mesh);
+    const auto after = topologyOf(mesh);
+    CHECK(after.vertices == before.vertices);
+    CHECK(after.edges == before.edges);
+    CHECK(after.faces == before.faces);
+    CHECK(after.components == before.components);
+    CHECK(after.genus == before.genus);
+    CHECK(mesh.n_vertices() == before.vertices); // compacted
+    CHECK(signedVolume(mesh) == doctest::Approx(volume).epsilon(1e-12));
+    CHECK(surfaceOf(mesh) == surface);
+    int wrong = 0;
+    for (auto v : mesh.vertices()) {
+        wrong += mesh.property(velocity, v) != mesh.point(v) * 0.5;
+        wrong += mesh.property(tag, v) != int(std::lround(mesh.point(v)[0] * 1000));
+    }
+    CHECK(wrong == 0);
+    const int gapAfter = medianEdgeGap(mesh);
+    MESSAGE("median index gap between edge endpoints: " << gapBefore << " -> " << gapAfter);
+    CHECK(gapAfter * 4 < gapBefore);
 }

@@ -43,6 +43,10 @@ struct EvolutionOptions {
     ForceOptions forces;
     double mass = 1.0;
     double damping = 0.5;
+    /// Renumber the mesh along a space-filling curve (reorderForLocality) at the first step and
+    /// whenever splits have appended a quarter of it since: on large evolved meshes this makes an
+    /// iteration about 1.5-2x faster (core_bench). Off: handles change only by compaction.
+    bool renumber = true;
     int maxIterations = 3000;
     int minIterations = 20;
     /// Converged when no vertex is still travelling (drifting faster than half the free-flight speed,
@@ -93,6 +97,7 @@ private:
     int mLastTopologyEvent = 0;
     int mLastCut = 0;   ///< iteration of the last tunnel cut (0: none)
     int mLastMerge = 0; ///< iteration of the last merge (0: none)
+    std::size_t mAppended = 0; ///< vertices added by splits since the mesh was last renumbered
     void updateConvergence();
 };
 

@@ -72,6 +72,13 @@ Vec3 faceNormal(const Mesh& mesh, FaceHandle f);
 /// Appends a copy of `src` to `dst` as new component(s).
 void appendMesh(Mesh& dst, const Mesh& src);
 
+/// Renumbers the live vertices along a space-filling (Morton) curve, and the faces, edges and
+/// halfedges after them, then compacts the mesh: neighbours end up close in memory, which keeps
+/// every per-iteration pass cache-friendly (splits append vertices at the end of the arrays and
+/// collapses leave holes, so an evolved mesh's neighbours are scattered). Geometry, connectivity and
+/// every custom vertex property (velocity, ...) are kept; handles change as with garbage_collection().
+void reorderForLocality(Mesh& mesh);
+
 /// Requests the status attributes needed by delete/collapse and the velocity property.
 void prepareMesh(Mesh& mesh);
 
