@@ -108,7 +108,7 @@ std::uint64_t frameSignature(const riemesh::viewer::Scene& scene, const ImDrawDa
                             scene.background.x(), scene.background.y(), scene.background.z()};
     const std::uint64_t other[] = {scene.meshVersion, scene.sliceVersion,
                                    std::uint64_t(scene.showMesh) | std::uint64_t(scene.wireframe) << 1 |
-                                       std::uint64_t(scene.showSlice) << 2,
+                                       std::uint64_t(scene.showSlice) << 2 | std::uint64_t(scene.lighting) << 3,
                                    std::uint64_t(std::uint32_t(width)) << 32 | std::uint32_t(height)};
     mix(camera, sizeof camera);
     mix(other, sizeof other);
