@@ -121,6 +121,19 @@ out vec4 fragColour;
 void main() { fragColour = vec4(texture(uImage, vTexCoord).rgb, 1.0); }
 )";
 
+// The layer (see Renderer::beginLayer): its pixels copied as they are (premultiplied alpha).
+const char* kLayerVertex = R"(
+layout(location = 0) in vec2 aPosition;
+uniform vec2 uScale;
+void main() { gl_Position = vec4(aPosition * uScale - 1.0, 0.0, 1.0); }
+)";
+
+const char* kLayerFragment = R"(
+uniform sampler2D uLayer;
+out vec4 fragColour;
+void main() { fragColour = texelFetch(uLayer, ivec2(gl_FragCoord.xy), 0); }
+)";
+
 unsigned compile(GLenum type, const std::string& source)
 {
     const GLuint s = glCreateShader(type);
@@ -199,6 +212,14 @@ Renderer::Renderer(const char* glslVersion)
     glVertexAttribPointer(0, 3, GL_FLOAT, GL_FALSE, 5 * sizeof(float), reinterpret_cast<void*>(0));
     glEnableVertexAttribArray(1);
     glVertexAttribPointer(1, 2, GL_FLOAT, GL_FALSE, 5 * sizeof(float), reinterpret_cast<void*>(3 * sizeof(float)));
+    mLayerProgram = link(glslVersion, kLayerVertex, kLayerFragment);
+    glGenVertexArrays(1, &mLayerVao);
+    glGenBuffers(1, &mLayerVbo);
+    glBindVertexArray(mLayerVao);
+    glBindBuffer(GL_ARRAY_BUFFER, mLayerVbo);
+    glEnableVertexAttribArray(0);
+    glVertexAttribPointer(0, 2, GL_FLOAT, GL_FALSE, 2 * sizeof(float), reinterpret_cast<void*>(0));
+
     glGenTextures(1, &mSliceTexture);
     glBindTexture(GL_TEXTURE_2D, mSliceTexture);
     glTexParameteri(GL_TEXTURE_2D, GL_TEXTURE_MIN_FILTER, GL_LINEAR);
@@ -210,11 +231,14 @@ Renderer::Renderer(const char* glslVersion)
 
 Renderer::~Renderer()
 {
-    const GLuint buffers[] = {mMeshVbo, mTriangleIbo, mEdgeIbo, mSectionVbo, mSliceVbo};
-    glDeleteBuffers(5, buffers);
-    const GLuint arrays[] = {mMeshVao, mSectionVao, mSliceVao};
-    glDeleteVertexArrays(3, arrays);
-    glDeleteTextures(1, &mSliceTexture);
+    const GLuint buffers[] = {mMeshVbo, mTriangleIbo, mEdgeIbo, mSectionVbo, mSliceVbo, mLayerVbo};
+    glDeleteBuffers(6, buffers);
+    const GLuint arrays[] = {mMeshVao, mSectionVao, mSliceVao, mLayerVao};
+    glDeleteVertexArrays(4, arrays);
+    const GLuint textures[] = {mSliceTexture, mLayerTexture};
+    glDeleteTextures(mLayerTexture ? 2 : 1, textures);
+    if (mLayerFbo) glDeleteFramebuffers(1, &mLayerFbo);
+    glDeleteProgram(mLayerProgram);
     glDeleteProgram(mMeshProgram);
     glDeleteProgram(mVertexLitProgram);
     glDeleteProgram(mLineProgram);
@@ -401,6 +425,61 @@ void Renderer::draw(const Scene& scene, int width, int height)
     }
     glBindVertexArray(0);
     glUseProgram(0);
+}
+
+void Renderer::beginLayer(int width, int height)
+{
+    if (!mLayerFbo) {
+        glGenFramebuffers(1, &mLayerFbo);
+        glGenTextures(1, &mLayerTexture);
+    }
+    glBindFramebuffer(GL_FRAMEBUFFER, mLayerFbo);
+    if (width != mLayerWidth || height != mLayerHeight) {
+        mLayerWidth = width;
+        mLayerHeight = height;
+        glBindTexture(GL_TEXTURE_2D, mLayerTexture);
+        glTexImage2D(GL_TEXTURE_2D, 0, GL_RGBA8, std::max(width, 1), std::max(height, 1), 0, GL_RGBA,
+                     GL_UNSIGNED_BYTE, nullptr);
+        glTexParameteri(GL_TEXTURE_2D, GL_TEXTURE_MIN_FILTER, GL_NEAREST);
+        glTexParameteri(GL_TEXTURE_2D, GL_TEXTURE_MAG_FILTER, GL_NEAREST);
+        glFramebufferTexture2D(GL_FRAMEBUFFER, GL_COLOR_ATTACHMENT0, GL_TEXTURE_2D, mLayerTexture, 0);
+    }
+    glViewport(0, 0, width, height);
+    glDisable(GL_SCISSOR_TEST);
+    glClearColor(0.f, 0.f, 0.f, 0.f);
+    glClear(GL_COLOR_BUFFER_BIT);
+}
+
+void Renderer::endLayer() { glBindFramebuffer(GL_FRAMEBUFFER, 0); }
+
+void Renderer::compositeLayer(int x0, int y0, int x1, int y1, int width, int height)
+{
+    x0 = std::max(x0, 0);
+    y0 = std::max(y0, 0);
+    x1 = std::min({x1, width, mLayerWidth});
+    y1 = std::min({y1, height, mLayerHeight});
+    if (!mLayerFbo || x1 <= x0 || y1 <= y0) return;
+    const float quad[12] = {float(x0), float(y0), float(x1), float(y0), float(x1), float(y1),
+                            float(x0), float(y0), float(x1), float(y1), float(x0), float(y1)};
+    glViewport(0, 0, width, height);
+    glDisable(GL_DEPTH_TEST);
+    glDisable(GL_CULL_FACE);
+    glDisable(GL_SCISSOR_TEST);
+    glEnable(GL_BLEND);
+    glBlendEquation(GL_FUNC_ADD);
+    glBlendFunc(GL_ONE, GL_ONE_MINUS_SRC_ALPHA);
+    glUseProgram(mLayerProgram);
+    glUniform2f(glGetUniformLocation(mLayerProgram, "uScale"), 2.f / float(width), 2.f / float(height));
+    glActiveTexture(GL_TEXTURE0);
+    glBindTexture(GL_TEXTURE_2D, mLayerTexture);
+    glUniform1i(glGetUniformLocation(mLayerProgram, "uLayer"), 0);
+    glBindVertexArray(mLayerVao);
+    glBindBuffer(GL_ARRAY_BUFFER, mLayerVbo);
+    glBufferData(GL_ARRAY_BUFFER, sizeof quad, quad, GL_STREAM_DRAW);
+    glDrawArrays(GL_TRIANGLES, 0, 6);
+    glBindVertexArray(0);
+    glUseProgram(0);
+    glDisable(GL_BLEND);
 }
 
 void Renderer::finish()

@@ -23,6 +23,14 @@ public:
 
     /// Clears the framebuffer (width x height pixels) and draws the scene's mesh and slice.
     void draw(const Scene& scene, int width, int height);
+    /// An offscreen layer the size of the framebuffer, for an image that changes less often than the
+    /// scene (the UI): draw it between beginLayer() and endLayer() (premultiplied alpha: blend
+    /// SRC_ALPHA, ONE_MINUS_SRC_ALPHA for colour and ONE, ONE_MINUS_SRC_ALPHA for alpha, as the ImGui
+    /// backend does), then compositeLayer() puts its pixels in [x0,x1) x [y0,y1) (framebuffer pixels,
+    /// origin bottom left) over the framebuffer: the same image as drawing it there directly.
+    void beginLayer(int width, int height);
+    void endLayer();
+    void compositeLayer(int x0, int y0, int x1, int y1, int width, int height);
     /// Waits until every GL command issued so far has executed (a one-pixel read back; for draw-time
     /// benchmarks).
     void finish();
@@ -32,6 +40,8 @@ private:
     unsigned mMeshVao = 0, mMeshVbo = 0, mTriangleIbo = 0, mEdgeIbo = 0;
     unsigned mSectionVao = 0, mSectionVbo = 0;
     unsigned mSliceVao = 0, mSliceVbo = 0, mSliceTexture = 0;
+    unsigned mLayerProgram = 0, mLayerVao = 0, mLayerVbo = 0, mLayerFbo = 0, mLayerTexture = 0;
+    int mLayerWidth = 0, mLayerHeight = 0;
     std::uint64_t mMeshVersion = ~0ull, mSliceVersion = ~0ull;
     int mTriangleCount = 0, mEdgeCount = 0, mSectionCount = 0;
     float mMeanEdge = 0; ///< world units
