@@ -658,10 +658,26 @@ void App::drawPanels()
     ImGui::SameLine();
     if (ImGui::Button("Reset", ImVec2(60, 0))) reset();
 
-    ImGui::Text("iteration %d  (%s)", mIteration, stateName());
-    ImGui::Text("vertices %zu  faces %zu", mTopology.vertices, mTopology.faces);
-    ImGui::Text("components %d  genus %d", mTopology.components, mTopology.genus);
-    ImGui::Text("merges %d  cuts %d  compute %.2f s", mMerges, mCuts, mComputeSeconds);
+    // While the model evolves its figures and plots change at every step: shown as they are every
+    // 0.2 s, so that the panel's image stays the same in between and the frames in between draw it
+    // from its layer (main.cpp) instead of redrawing its glyphs.
+    const bool evolving = mPlaying && mEvolution && !mEvolution->done();
+    if (!evolving || nowSeconds() - mPanelAt >= 0.2) {
+        mPanelAt = nowSeconds();
+        mPanel.iteration = mIteration;
+        mPanel.merges = mMerges;
+        mPanel.cuts = mCuts;
+        mPanel.topology = mTopology;
+        mPanel.computeSeconds = mComputeSeconds;
+        mPanel.energyCount = int(mEnergyLog.size());
+        mPanel.histogram = mHistogram;
+        mPanel.histogramMax = mHistogramMax;
+    }
+    const PanelFigures& p = mPanel;
+    ImGui::Text("iteration %d  (%s)", p.iteration, stateName());
+    ImGui::Text("vertices %zu  faces %zu", p.topology.vertices, p.topology.faces);
+    ImGui::Text("components %d  genus %d", p.topology.components, p.topology.genus);
+    ImGui::Text("merges %d  cuts %d  compute %.2f s", p.merges, p.cuts, p.computeSeconds);
     // Refreshed twice a second: a number that changes every frame would make every frame a new image
     // (the page does not draw a frame that shows the same image as the last one).
     if (nowSeconds() - mShownAt >= 0.5) {
@@ -677,15 +693,15 @@ void App::drawPanels()
 
     // --- plots
     if (ImGui::CollapsingHeader("Plots", ImGuiTreeNodeFlags_DefaultOpen)) {
-        const int n = int(mEnergyLog.size());
+        const int n = std::min(p.energyCount, int(mEnergyLog.size()));
         const int shown = std::min(n, 400);
         char overlay[64];
-        std::snprintf(overlay, sizeof overlay, "log10 E/delta^2 = %.2f", n ? mEnergyLog.back() : 0.f);
+        std::snprintf(overlay, sizeof overlay, "log10 E/delta^2 = %.2f", n ? mEnergyLog[n - 1] : 0.f);
         const float plotWidth = ImGui::GetWindowWidth() - 2 * ImGui::GetStyle().WindowPadding.x;
         ImGui::PlotLines("##energy", mEnergyLog.data() + (n - shown), shown, 0, overlay, FLT_MAX, FLT_MAX, ImVec2(plotWidth, 60));
         ImGui::TextDisabled("mean kinetic energy per iteration");
-        ImGui::PlotHistogram("##lengths", mHistogram.data(), int(mHistogram.size()), 0, "edge length / delta",
-                             0.f, mHistogramMax * 1.1f, ImVec2(plotWidth, 50));
+        ImGui::PlotHistogram("##lengths", p.histogram.data(), int(p.histogram.size()), 0, "edge length / delta",
+                             0.f, p.histogramMax * 1.1f, ImVec2(plotWidth, 50));
         ImGui::TextDisabled("0 .. 1.5 zeta; the band [1, zeta] is the regular one");
     }
 

@@ -167,6 +167,17 @@ private:
     double mLastFrameMs = 0;
     double mLastFrameStart = 0, mFrameInterval = 0; ///< seconds, smoothed
     double mShownAt = -1, mShownIntervalMs = 0, mShownFrameMs = 0; ///< the figures the panel shows
+    /// The model's figures the panel shows, refreshed at most every 0.2 s while the model evolves
+    /// (see drawPanels()) and at every frame otherwise.
+    struct PanelFigures {
+        int iteration = 0, merges = 0, cuts = 0;
+        MeshTopology topology;
+        double computeSeconds = 0;
+        int energyCount = 0; ///< entries of mEnergyLog plotted
+        std::vector<float> histogram;
+        float histogramMax = 0;
+    } mPanel;
+    double mPanelAt = -1;
 
     void installVolume(std::unique_ptr<NanoVolume> volume, std::unique_ptr<ScalarImage> image,
                        std::unique_ptr<MetricField> metric, const std::string& name);
