@@ -116,17 +116,31 @@ void reorderForLocality(Scene& s)
     for (std::size_t i = 0; i < nv; ++i) std::copy_n(&s.vertices[9 * i], 9, &verts[9 * remap[i]]);
     s.vertices.swap(verts);
     s.triangles.swap(tris);
-    // The edges (wireframe) in the order of their first vertex, for the same locality.
-    std::vector<std::uint64_t> edges(s.edges.size() / 2);
-    for (std::size_t i = 0; i < edges.size(); ++i)
-        edges[i] = (std::uint64_t(remap[s.edges[2 * i]]) << 32) | remap[s.edges[2 * i + 1]];
-    std::sort(edges.begin(), edges.end(), [](std::uint64_t a, std::uint64_t b) {
-        return std::min(a >> 32, a & 0xffffffffu) < std::min(b >> 32, b & 0xffffffffu);
-    });
-    for (std::size_t i = 0; i < edges.size(); ++i) {
-        s.edges[2 * i] = std::uint32_t(edges[i] >> 32);
-        s.edges[2 * i + 1] = std::uint32_t(edges[i] & 0xffffffffu);
+    // The edges (wireframe) in the order of their first vertex, for the same locality; their faces
+    // follow the triangles' new order.
+    std::vector<std::uint32_t> faceAt(nt);
+    for (std::size_t i = 0; i < nt; ++i) faceAt[keyed[i] & 0xffffffffu] = std::uint32_t(i);
+    const std::size_t ne = s.edges.size() / 2;
+    std::vector<std::uint32_t> order(ne);
+    std::vector<std::uint32_t> first(ne);
+    for (std::size_t i = 0; i < ne; ++i) {
+        order[i] = std::uint32_t(i);
+        first[i] = std::min(remap[s.edges[2 * i]], remap[s.edges[2 * i + 1]]);
     }
+    std::sort(order.begin(), order.end(), [&](std::uint32_t a, std::uint32_t b) { return first[a] < first[b]; });
+    std::vector<std::uint32_t> edges(2 * ne), edgeFaces(2 * ne);
+    const bool withFaces = s.edgeFaces.size() == 2 * ne;
+    for (std::size_t i = 0; i < ne; ++i) {
+        const std::uint32_t e = order[i];
+        edges[2 * i] = remap[s.edges[2 * e]];
+        edges[2 * i + 1] = remap[s.edges[2 * e + 1]];
+        for (int k = 0; withFaces && k < 2; ++k) {
+            const std::uint32_t f = s.edgeFaces[2 * e + k];
+            edgeFaces[2 * i + k] = f < nt ? faceAt[f] : ~0u;
+        }
+    }
+    s.edges.swap(edges);
+    if (withFaces) s.edgeFaces.swap(edgeFaces);
 }
 
 const char* kColourNames[] = {"shaded", "metric edge length", "local resolution"};
@@ -406,7 +420,9 @@ void App::rebuildMeshGeometry()
     auto& value = mScratchValues;
     auto& count = mScratchCounts;
     auto& index = mScratchIndex;
+    auto& faceIndex = mScratchFaceIndex;
     pos.resize(nv);
+    faceIndex.assign(mMesh.n_faces(), ~0u);
     nrm.assign(nv, Vec3::Zero());
     index.assign(nv, 0);
     std::uint32_t n = 0;
@@ -429,6 +445,7 @@ void App::rebuildMeshGeometry()
         const Vec3 p[3] = {pos[iv[0]], pos[iv[1]], pos[iv[2]]};
         // vertexNormal(): sum of (b - a) x (c - a) with a = from(h), b = to(h), c = to(next h).
         const Vec3 fn = (p[0] - p[2]).cross(p[1] - p[2]);
+        faceIndex[f.idx()] = std::uint32_t(t / 3);
         for (int k = 0; k < 3; ++k) {
             nrm[iv[k]] += fn;
             s.triangles[t++] = index[iv[k]];
@@ -450,6 +467,7 @@ void App::rebuildMeshGeometry()
     // Mean length of the edges around each vertex, measured with the metric at the vertex (metric edge
     // length) or Euclidean (local resolution), over delta.
     s.edges.resize(std::size_t(2) * mMesh.n_edges());
+    s.edgeFaces.resize(s.edges.size());
     std::size_t k = 0;
     const bool coloured = mColour != ColourMode::Shaded;
     if (coloured) {
@@ -463,6 +481,9 @@ void App::rebuildMeshGeometry()
     for (auto e : mMesh.edges()) {
         const auto h = mMesh.halfedge_handle(e, 0);
         const int a = mMesh.from_vertex_handle(h).idx(), b = mMesh.to_vertex_handle(h).idx();
+        const auto f0 = mMesh.face_handle(h), f1 = mMesh.face_handle(mMesh.opposite_halfedge_handle(h));
+        s.edgeFaces[k] = f0.is_valid() ? faceIndex[f0.idx()] : ~0u;
+        s.edgeFaces[k + 1] = f1.is_valid() ? faceIndex[f1.idx()] : ~0u;
         s.edges[k++] = index[a];
         s.edges[k++] = index[b];
         if (!coloured) continue;
@@ -479,6 +500,7 @@ void App::rebuildMeshGeometry()
         ++count[b];
     }
     s.edges.resize(k);
+    s.edgeFaces.resize(k);
     const double delta = evolutionOptions().delta;
     float lo = 1e30f, hi = -1e30f;
     if (coloured)
@@ -636,10 +658,26 @@ void App::drawPanels()
     ImGui::SameLine();
     if (ImGui::Button("Reset", ImVec2(60, 0))) reset();
 
-    ImGui::Text("iteration %d  (%s)", mIteration, stateName());
-    ImGui::Text("vertices %zu  faces %zu", mTopology.vertices, mTopology.faces);
-    ImGui::Text("components %d  genus %d", mTopology.components, mTopology.genus);
-    ImGui::Text("merges %d  cuts %d  compute %.2f s", mMerges, mCuts, mComputeSeconds);
+    // While the model evolves its figures and plots change at every step: shown as they are every
+    // 0.2 s, so that the panel's image stays the same in between and the frames in between draw it
+    // from its layer (main.cpp) instead of redrawing its glyphs.
+    const bool evolving = mPlaying && mEvolution && !mEvolution->done();
+    if (!evolving || nowSeconds() - mPanelAt >= 0.2) {
+        mPanelAt = nowSeconds();
+        mPanel.iteration = mIteration;
+        mPanel.merges = mMerges;
+        mPanel.cuts = mCuts;
+        mPanel.topology = mTopology;
+        mPanel.computeSeconds = mComputeSeconds;
+        mPanel.energyCount = int(mEnergyLog.size());
+        mPanel.histogram = mHistogram;
+        mPanel.histogramMax = mHistogramMax;
+    }
+    const PanelFigures& p = mPanel;
+    ImGui::Text("iteration %d  (%s)", p.iteration, stateName());
+    ImGui::Text("vertices %zu  faces %zu", p.topology.vertices, p.topology.faces);
+    ImGui::Text("components %d  genus %d", p.topology.components, p.topology.genus);
+    ImGui::Text("merges %d  cuts %d  compute %.2f s", p.merges, p.cuts, p.computeSeconds);
     // Refreshed twice a second: a number that changes every frame would make every frame a new image
     // (the page does not draw a frame that shows the same image as the last one).
     if (nowSeconds() - mShownAt >= 0.5) {
@@ -655,15 +693,15 @@ void App::drawPanels()
 
     // --- plots
     if (ImGui::CollapsingHeader("Plots", ImGuiTreeNodeFlags_DefaultOpen)) {
-        const int n = int(mEnergyLog.size());
+        const int n = std::min(p.energyCount, int(mEnergyLog.size()));
         const int shown = std::min(n, 400);
         char overlay[64];
-        std::snprintf(overlay, sizeof overlay, "log10 E/delta^2 = %.2f", n ? mEnergyLog.back() : 0.f);
+        std::snprintf(overlay, sizeof overlay, "log10 E/delta^2 = %.2f", n ? mEnergyLog[n - 1] : 0.f);
         const float plotWidth = ImGui::GetWindowWidth() - 2 * ImGui::GetStyle().WindowPadding.x;
         ImGui::PlotLines("##energy", mEnergyLog.data() + (n - shown), shown, 0, overlay, FLT_MAX, FLT_MAX, ImVec2(plotWidth, 60));
         ImGui::TextDisabled("mean kinetic energy per iteration");
-        ImGui::PlotHistogram("##lengths", mHistogram.data(), int(mHistogram.size()), 0, "edge length / delta",
-                             0.f, mHistogramMax * 1.1f, ImVec2(plotWidth, 50));
+        ImGui::PlotHistogram("##lengths", p.histogram.data(), int(p.histogram.size()), 0, "edge length / delta",
+                             0.f, p.histogramMax * 1.1f, ImVec2(plotWidth, 50));
         ImGui::TextDisabled("0 .. 1.5 zeta; the band [1, zeta] is the regular one");
     }
 
@@ -772,6 +810,7 @@ bool App::setParameter(const std::string& name, double value)
     }
     if (name == "camera_yaw") { mScene.camera.yaw = float(value); return true; }
     if (name == "wireframe") { mScene.wireframe = value != 0; return true; }
+    if (name == "lighting") { mScene.lighting = std::clamp(int(value), 0, 2); return true; }
     if (name == "show_mesh") { mScene.showMesh = value != 0; return true; }
     if (name == "show_slice") { mScene.showSlice = value != 0; return true; }
     if (name == "slice_axis" || name == "slice_position") {

@@ -64,11 +64,17 @@ struct Scene {
     std::vector<float> vertices;
     /// Triangles (3 indices each) and edges (2 each) into `vertices`.
     std::vector<std::uint32_t> triangles, edges;
+    /// Per edge, its two triangles (indices into triangles / 3; ~0u: none): the renderer draws only
+    /// the edges of the triangles that face the camera.
+    std::vector<std::uint32_t> edgeFaces;
     /// The mesh's cross-section with the slice plane: per end x y z.
     std::vector<float> section;
     SliceImage slice;
     std::uint64_t meshVersion = 0, sliceVersion = 0;
     bool showMesh = true, wireframe = false, showSlice = true;
+    /// Mesh lighting: 0 automatic (per vertex when the mesh's edges are under 5 pixels on the screen,
+    /// where it looks the same and costs software WebGL much less), 1 per pixel, 2 per vertex.
+    int lighting = 0;
     Camera camera;
     Vec3f background{0.11f, 0.12f, 0.14f};
 };
@@ -87,7 +93,7 @@ public:
     /// Restarts the evolution from the initial box with the current parameters.
     void reset();
 
-    /// One frame: evolution (at most `budgetMs` of work), camera input, UI. `width`/`height` are the
+    /// One frame: evolution (steps until `budgetMs` have passed, at least one), camera input, UI. `width`/`height` are the
     /// framebuffer size in pixels.
     void frame(double budgetMs, int width, int height);
 
@@ -112,7 +118,7 @@ public:
     /// Sets a model parameter by name (iso, delta, zeta, mu_scale, riemannian, inflation, umbrella,
     /// curvature, gradient) or a display setting (colour: 0 shaded, 1 metric edge length, 2 local
     /// resolution; wireframe, show_mesh, show_slice: 0/1; slice_axis: 0..2; slice_position: 0..1;
-    /// camera_yaw: radians) as
+    /// camera_yaw: radians; lighting: 0 automatic, 1 per pixel, 2 per vertex) as
     /// if changed in the UI; false for an unknown name.
     bool setParameter(const std::string& name, double value);
 
@@ -147,7 +153,7 @@ private:
     std::vector<Mat3> mScratchMetric;
     std::vector<double> mScratchValues;
     std::vector<int> mScratchCounts;
-    std::vector<std::uint32_t> mScratchIndex;
+    std::vector<std::uint32_t> mScratchIndex, mScratchFaceIndex;
     ColourMode mColour = ColourMode::MetricEdgeLength;
     int mSliceAxis = 2;
     float mSlicePosition = 0.5f;       ///< fraction of the bounds along the axis
@@ -161,6 +167,17 @@ private:
     double mLastFrameMs = 0;
     double mLastFrameStart = 0, mFrameInterval = 0; ///< seconds, smoothed
     double mShownAt = -1, mShownIntervalMs = 0, mShownFrameMs = 0; ///< the figures the panel shows
+    /// The model's figures the panel shows, refreshed at most every 0.2 s while the model evolves
+    /// (see drawPanels()) and at every frame otherwise.
+    struct PanelFigures {
+        int iteration = 0, merges = 0, cuts = 0;
+        MeshTopology topology;
+        double computeSeconds = 0;
+        int energyCount = 0; ///< entries of mEnergyLog plotted
+        std::vector<float> histogram;
+        float histogramMax = 0;
+    } mPanel;
+    double mPanelAt = -1;
 
     void installVolume(std::unique_ptr<NanoVolume> volume, std::unique_ptr<ScalarImage> image,
                        std::unique_ptr<MetricField> metric, const std::string& name);

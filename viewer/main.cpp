@@ -17,6 +17,9 @@
 #include <emscripten/html5.h>
 #endif
 
+#include <algorithm>
+#include <cfloat>
+#include <cmath>
 #include <cstdint>
 #include <cstdio>
 #include <cstdlib>
@@ -36,7 +39,11 @@ struct Viewer {
     GLFWwindow* window = nullptr;
     App app;
     std::unique_ptr<Renderer> renderer;
-    std::uint64_t shown = 0; ///< frameSignature() of the image on the canvas (web; 0: none)
+    std::uint64_t shown = 0; ///< signature of the image on the canvas (web; 0: none)
+    /// The UI drawn once into the renderer's layer and composited while it stays the same (see
+    /// drawUi()): uiSignature() of the last frame's UI, of the layer's content (0: none), its bounds.
+    std::uint64_t uiLast = 0, uiCached = 0;
+    int uiBounds[4] = {0, 0, 0, 0};
 };
 Viewer* gViewer = nullptr;
 
@@ -84,13 +91,12 @@ void offerDownload(const std::string& path)
 #endif
 }
 
-#ifdef __EMSCRIPTEN__
-/// A 64-bit hash of everything the next image would show: the scene's inputs (mesh and slice
-/// versions, camera, display flags, size) and ImGui's draw lists (vertices, indices, commands).
-std::uint64_t frameSignature(const riemesh::viewer::Scene& scene, const ImDrawData* ui, int width, int height)
-{
+/// 64-bit hashes of what the next image shows: the scene's inputs (mesh and slice versions, camera,
+/// display flags, size) and, apart, ImGui's draw lists (vertices, indices, commands).
+struct Hash {
     std::uint64_t h = 0x9e3779b97f4a7c15ull;
-    auto mix = [&h](const void* data, std::size_t bytes) {
+    void mix(const void* data, std::size_t bytes)
+    {
         const auto* p = static_cast<const unsigned char*>(data);
         std::uint64_t word = 0;
         for (; bytes >= 8; bytes -= 8, p += 8) {
@@ -102,35 +108,85 @@ std::uint64_t frameSignature(const riemesh::viewer::Scene& scene, const ImDrawDa
         std::memcpy(&word, p, bytes);
         h = (h ^ word ^ (std::uint64_t(bytes) << 56)) * 0xc4ceb9fe1a85ec53ull;
         h ^= h >> 29;
-    };
+    }
+    std::uint64_t value() const { return h == 0 ? 1 : h; }
+};
+
+std::uint64_t sceneSignature(const riemesh::viewer::Scene& scene, int width, int height)
+{
+    Hash h;
     const auto& c = scene.camera;
     const float camera[] = {c.target.x(), c.target.y(), c.target.z(), c.yaw, c.pitch, c.distance, c.fovY,
                             scene.background.x(), scene.background.y(), scene.background.z()};
     const std::uint64_t other[] = {scene.meshVersion, scene.sliceVersion,
                                    std::uint64_t(scene.showMesh) | std::uint64_t(scene.wireframe) << 1 |
-                                       std::uint64_t(scene.showSlice) << 2,
+                                       std::uint64_t(scene.showSlice) << 2 | std::uint64_t(scene.lighting) << 3,
                                    std::uint64_t(std::uint32_t(width)) << 32 | std::uint32_t(height)};
-    mix(camera, sizeof camera);
-    mix(other, sizeof other);
-    if (!ui || !ui->Valid) return h ^ 1;
+    h.mix(camera, sizeof camera);
+    h.mix(other, sizeof other);
+    return h.value();
+}
+
+std::uint64_t uiSignature(const ImDrawData* ui)
+{
+    Hash h;
+    if (!ui || !ui->Valid) return 1;
     const float display[] = {ui->DisplayPos.x, ui->DisplayPos.y, ui->DisplaySize.x, ui->DisplaySize.y,
                              ui->FramebufferScale.x, ui->FramebufferScale.y};
-    mix(display, sizeof display);
+    h.mix(display, sizeof display);
     for (int i = 0; i < ui->CmdListsCount; ++i) {
         const ImDrawList* list = ui->CmdLists[i];
-        mix(list->VtxBuffer.Data, std::size_t(list->VtxBuffer.Size) * sizeof(ImDrawVert));
-        mix(list->IdxBuffer.Data, std::size_t(list->IdxBuffer.Size) * sizeof(ImDrawIdx));
+        h.mix(list->VtxBuffer.Data, std::size_t(list->VtxBuffer.Size) * sizeof(ImDrawVert));
+        h.mix(list->IdxBuffer.Data, std::size_t(list->IdxBuffer.Size) * sizeof(ImDrawIdx));
         for (const ImDrawCmd& cmd : list->CmdBuffer) {
             const std::uint64_t fields[] = {std::uint64_t(reinterpret_cast<std::uintptr_t>(cmd.TextureId)),
                                             cmd.VtxOffset, cmd.IdxOffset, cmd.ElemCount,
                                             std::uint64_t(reinterpret_cast<std::uintptr_t>(cmd.UserCallback))};
-            mix(&cmd.ClipRect, sizeof cmd.ClipRect);
-            mix(fields, sizeof fields);
+            h.mix(&cmd.ClipRect, sizeof cmd.ClipRect);
+            h.mix(fields, sizeof fields);
         }
     }
-    return h == 0 ? 1 : h;
+    return h.value();
 }
-#endif
+
+/// Draws the UI over the scene. A UI drawn again and again the same (the camera orbits, the mesh
+/// evolves under a still panel) is drawn once into the renderer's layer and then composited: one
+/// textured rectangle instead of the panel's blended glyphs and shapes, which cost software WebGL
+/// about as much as a 20k-vertex mesh. A UI that changed since the last frame is drawn directly
+/// (drawing it into the layer would cost more, for nothing if it changes again).
+void drawUi(Viewer& v, std::uint64_t signature, int width, int height)
+{
+    ImDrawData* ui = ImGui::GetDrawData();
+    if (!ui || !ui->Valid || ui->TotalVtxCount == 0) {
+        v.uiLast = signature;
+        return;
+    }
+    if (signature != v.uiCached && signature == v.uiLast) {
+        v.renderer->beginLayer(width, height);
+        ImGui_ImplOpenGL3_RenderDrawData(ui);
+        v.renderer->endLayer();
+        v.uiCached = signature;
+        // The layer's bounds: those of the UI's vertices, in framebuffer pixels (origin bottom left).
+        float lo[2] = {FLT_MAX, FLT_MAX}, hi[2] = {-FLT_MAX, -FLT_MAX};
+        for (int i = 0; i < ui->CmdListsCount; ++i)
+            for (const ImDrawVert& p : ui->CmdLists[i]->VtxBuffer) {
+                lo[0] = std::min(lo[0], p.pos.x);
+                lo[1] = std::min(lo[1], p.pos.y);
+                hi[0] = std::max(hi[0], p.pos.x);
+                hi[1] = std::max(hi[1], p.pos.y);
+            }
+        const ImVec2 o = ui->DisplayPos, s = ui->FramebufferScale;
+        v.uiBounds[0] = int(std::floor((lo[0] - o.x) * s.x)) - 1;
+        v.uiBounds[1] = height - int(std::ceil((hi[1] - o.y) * s.y)) - 1;
+        v.uiBounds[2] = int(std::ceil((hi[0] - o.x) * s.x)) + 1;
+        v.uiBounds[3] = height - int(std::floor((lo[1] - o.y) * s.y)) + 1;
+    }
+    if (signature == v.uiCached)
+        v.renderer->compositeLayer(v.uiBounds[0], v.uiBounds[1], v.uiBounds[2], v.uiBounds[3], width, height);
+    else
+        ImGui_ImplOpenGL3_RenderDrawData(ui);
+    v.uiLast = signature;
+}
 
 void frame()
 {
@@ -151,15 +207,18 @@ void frame()
     ImGui_ImplOpenGL3_NewFrame();
     ImGui_ImplGlfw_NewFrame();
     ImGui::NewFrame();
-    v.app.frame(25.0, width, height); // at most ~25 ms of evolution per frame: the UI never freezes
+    // Evolution steps for ~8 ms per frame (at least one): the UI stays responsive (a page that spent
+    // 25 ms per frame on a small mesh ran at ~25 frames per second); see App::frame().
+    v.app.frame(8.0, width, height);
     ImGui::Render();
 
+    const std::uint64_t ui = uiSignature(ImGui::GetDrawData());
 #ifdef __EMSCRIPTEN__
     // A frame that would show the same image as the canvas does is not drawn: the browser keeps
     // showing the last one (it presents a WebGL canvas only when it was drawn to). An idle viewer
     // then costs its UI logic only, whatever the size of the mesh; anything that changes the image
     // (camera, mesh, slice, display, the UI's text or hover state) draws the whole frame.
-    const std::uint64_t signature = frameSignature(v.app.scene(), ImGui::GetDrawData(), width, height);
+    const std::uint64_t signature = sceneSignature(v.app.scene(), width, height) * 0x9e3779b97f4a7c15ull ^ ui;
     const bool draw = signature != v.shown;
     v.shown = signature;
 #else
@@ -167,7 +226,7 @@ void frame()
 #endif
     if (draw) {
         v.renderer->draw(v.app.scene(), width, height);
-        ImGui_ImplOpenGL3_RenderDrawData(ImGui::GetDrawData());
+        drawUi(v, ui, width, height);
         glfwSwapBuffers(v.window);
     }
 
@@ -198,6 +257,29 @@ EMSCRIPTEN_KEEPALIVE int riemesh_set_parameter(const char* name, double value)
 EMSCRIPTEN_KEEPALIVE int riemesh_load(const char* path)
 {
     return gViewer && gViewer->app.loadVolume(path) ? 1 : 0;
+}
+/// Draw cost of a whole frame as the main loop draws it while the camera moves (the scene, then the
+/// UI as it is drawn when it has not changed: composited from its layer), each render waited for as
+/// in riemesh_time_draw; mean milliseconds per frame (benchmarks only).
+EMSCRIPTEN_KEEPALIVE double riemesh_time_frame(int count)
+{
+    if (!gViewer || count <= 0) return -1;
+    Viewer& v = *gViewer;
+    int width = 0, height = 0;
+    glfwGetFramebufferSize(v.window, &width, &height);
+    const std::uint64_t ui = uiSignature(ImGui::GetDrawData());
+    v.uiLast = ui; // as after a frame with the same UI: it is drawn into its layer, then composited
+    v.renderer->draw(v.app.scene(), width, height);
+    drawUi(v, ui, width, height);
+    v.renderer->finish();
+    const double start = emscripten_get_now();
+    for (int i = 0; i < count; ++i) {
+        v.renderer->draw(v.app.scene(), width, height);
+        drawUi(v, ui, width, height);
+        v.renderer->finish();
+    }
+    gViewer->shown = 0; // the next frame draws
+    return (emscripten_get_now() - start) / count;
 }
 /// Draw cost of the current scene, apart from the browser's frame pacing and compositing: renders
 /// it `count` times, each finished by a one-pixel read back (which waits for the GPU process), and

@@ -8,6 +8,8 @@
 #include <GL/glext.h>
 #endif
 
+#include <algorithm>
+#include <cmath>
 #include <stdexcept>
 #include <string>
 
@@ -31,6 +33,26 @@ void main() {
 }
 )";
 
+// The lighting, shared by the per-pixel and the per-vertex mesh programs: a two-sided headlight plus
+// a little sky light; back faces (inside of a cut) darker. s^48 as products: pow() is a log and an
+// exp per pixel in software WebGL.
+const char* kLighting = R"(
+vec3 lit(vec3 normal, vec3 colour, vec3 toEye) {
+    vec3 n = normalize(normal);
+    toEye = normalize(toEye);
+    float facing = dot(n, toEye);
+    vec3 base = facing < 0.0 ? colour * 0.45 : colour;
+    n = facing < 0.0 ? -n : n;
+    float diffuse = max(dot(n, toEye), 0.0);
+    vec3 h = normalize(toEye + vec3(0.0, 0.0, 0.3));
+    float s = max(dot(n, h), 0.0);
+    float s2 = s * s, s4 = s2 * s2, s8 = s4 * s4, s16 = s8 * s8;
+    float specular = s16 * s16 * s16 * 0.25;
+    float sky = 0.5 + 0.5 * n.z;
+    return base * (0.18 + 0.12 * sky + 0.72 * diffuse) + vec3(specular);
+}
+)";
+
 const char* kMeshFragment = R"(
 precision highp float;
 in vec3 vNormal;
@@ -38,19 +60,30 @@ in vec3 vColour;
 in vec3 vPosition;
 uniform vec3 uEye;
 out vec4 fragColour;
+void main() { fragColour = vec4(lit(vNormal, vColour, uEye - vPosition), 1.0); }
+)";
+
+// Per-vertex lighting (Gouraud): the same lighting at the vertices, interpolated. For a mesh whose
+// triangles are a few pixels wide it gives the same image as the per-pixel program, and costs
+// software WebGL much less: one interpolated colour instead of three vectors, no lighting per pixel.
+const char* kVertexLitVertex = R"(
+layout(location = 0) in vec3 aPosition;
+layout(location = 1) in vec3 aNormal;
+layout(location = 2) in vec3 aColour;
+uniform mat4 uViewProjection;
+uniform vec3 uEye;
+out vec3 vShade;
 void main() {
-    vec3 n = normalize(vNormal);
-    vec3 toEye = normalize(uEye - vPosition);
-    // Two-sided headlight plus a little sky light; back faces (inside of a cut) darker.
-    float facing = dot(n, toEye);
-    vec3 base = facing < 0.0 ? vColour * 0.45 : vColour;
-    n = facing < 0.0 ? -n : n;
-    float diffuse = max(dot(n, toEye), 0.0);
-    vec3 h = normalize(toEye + vec3(0.0, 0.0, 0.3));
-    float specular = pow(max(dot(n, h), 0.0), 48.0) * 0.25;
-    float sky = 0.5 + 0.5 * n.z;
-    fragColour = vec4(base * (0.18 + 0.12 * sky + 0.72 * diffuse) + vec3(specular), 1.0);
+    vShade = lit(aNormal, aColour, uEye - aPosition);
+    gl_Position = uViewProjection * vec4(aPosition, 1.0);
 }
+)";
+
+const char* kVertexLitFragment = R"(
+precision mediump float;
+in vec3 vShade;
+out vec4 fragColour;
+void main() { fragColour = vec4(vShade, 1.0); }
 )";
 
 const char* kLineVertex = R"(
@@ -88,6 +121,19 @@ out vec4 fragColour;
 void main() { fragColour = vec4(texture(uImage, vTexCoord).rgb, 1.0); }
 )";
 
+// The layer (see Renderer::beginLayer): its pixels copied as they are (premultiplied alpha).
+const char* kLayerVertex = R"(
+layout(location = 0) in vec2 aPosition;
+uniform vec2 uScale;
+void main() { gl_Position = vec4(aPosition * uScale - 1.0, 0.0, 1.0); }
+)";
+
+const char* kLayerFragment = R"(
+uniform sampler2D uLayer;
+out vec4 fragColour;
+void main() { fragColour = texelFetch(uLayer, ivec2(gl_FragCoord.xy), 0); }
+)";
+
 unsigned compile(GLenum type, const std::string& source)
 {
     const GLuint s = glCreateShader(type);
@@ -104,9 +150,9 @@ unsigned compile(GLenum type, const std::string& source)
     return s;
 }
 
-unsigned link(const char* version, const char* vertex, const char* fragment)
+unsigned link(const char* version, const char* vertex, const char* fragment, const char* library = "")
 {
-    const std::string head = std::string(version) + "\n";
+    const std::string head = std::string(version) + "\nprecision highp float;\n" + library;
     const GLuint vs = compile(GL_VERTEX_SHADER, head + vertex);
     const GLuint fs = compile(GL_FRAGMENT_SHADER, head + fragment);
     const GLuint p = glCreateProgram();
@@ -125,11 +171,15 @@ unsigned link(const char* version, const char* vertex, const char* fragment)
     return p;
 }
 
+/// Mean edge length on the screen (pixels) under which the mesh is lit per vertex.
+constexpr float kVertexLitPixels = 5.f;
+
 } // namespace
 
 Renderer::Renderer(const char* glslVersion)
 {
-    mMeshProgram = link(glslVersion, kMeshVertex, kMeshFragment);
+    mMeshProgram = link(glslVersion, kMeshVertex, kMeshFragment, kLighting);
+    mVertexLitProgram = link(glslVersion, kVertexLitVertex, kVertexLitFragment, kLighting);
     mLineProgram = link(glslVersion, kLineVertex, kLineFragment);
     mSliceProgram = link(glslVersion, kSliceVertex, kSliceFragment);
 
@@ -162,6 +212,14 @@ Renderer::Renderer(const char* glslVersion)
     glVertexAttribPointer(0, 3, GL_FLOAT, GL_FALSE, 5 * sizeof(float), reinterpret_cast<void*>(0));
     glEnableVertexAttribArray(1);
     glVertexAttribPointer(1, 2, GL_FLOAT, GL_FALSE, 5 * sizeof(float), reinterpret_cast<void*>(3 * sizeof(float)));
+    mLayerProgram = link(glslVersion, kLayerVertex, kLayerFragment);
+    glGenVertexArrays(1, &mLayerVao);
+    glGenBuffers(1, &mLayerVbo);
+    glBindVertexArray(mLayerVao);
+    glBindBuffer(GL_ARRAY_BUFFER, mLayerVbo);
+    glEnableVertexAttribArray(0);
+    glVertexAttribPointer(0, 2, GL_FLOAT, GL_FALSE, 2 * sizeof(float), reinterpret_cast<void*>(0));
+
     glGenTextures(1, &mSliceTexture);
     glBindTexture(GL_TEXTURE_2D, mSliceTexture);
     glTexParameteri(GL_TEXTURE_2D, GL_TEXTURE_MIN_FILTER, GL_LINEAR);
@@ -173,12 +231,16 @@ Renderer::Renderer(const char* glslVersion)
 
 Renderer::~Renderer()
 {
-    const GLuint buffers[] = {mMeshVbo, mTriangleIbo, mEdgeIbo, mSectionVbo, mSliceVbo};
-    glDeleteBuffers(5, buffers);
-    const GLuint arrays[] = {mMeshVao, mSectionVao, mSliceVao};
-    glDeleteVertexArrays(3, arrays);
-    glDeleteTextures(1, &mSliceTexture);
+    const GLuint buffers[] = {mMeshVbo, mTriangleIbo, mEdgeIbo, mSectionVbo, mSliceVbo, mLayerVbo};
+    glDeleteBuffers(6, buffers);
+    const GLuint arrays[] = {mMeshVao, mSectionVao, mSliceVao, mLayerVao};
+    glDeleteVertexArrays(4, arrays);
+    const GLuint textures[] = {mSliceTexture, mLayerTexture};
+    glDeleteTextures(mLayerTexture ? 2 : 1, textures);
+    if (mLayerFbo) glDeleteFramebuffers(1, &mLayerFbo);
+    glDeleteProgram(mLayerProgram);
     glDeleteProgram(mMeshProgram);
+    glDeleteProgram(mVertexLitProgram);
     glDeleteProgram(mLineProgram);
     glDeleteProgram(mSliceProgram);
 }
@@ -191,19 +253,38 @@ void Renderer::upload(const Scene& scene)
         glBindBuffer(GL_ARRAY_BUFFER, mMeshVbo);
         glBufferData(GL_ARRAY_BUFFER, GLsizeiptr(scene.vertices.size() * sizeof(float)), scene.vertices.data(),
                      GL_DYNAMIC_DRAW);
-        glBindBuffer(GL_ELEMENT_ARRAY_BUFFER, mTriangleIbo);
-        glBufferData(GL_ELEMENT_ARRAY_BUFFER, GLsizeiptr(scene.triangles.size() * sizeof(std::uint32_t)),
-                     scene.triangles.data(), GL_DYNAMIC_DRAW);
         glBindVertexArray(0);
-        glBindBuffer(GL_ELEMENT_ARRAY_BUFFER, mEdgeIbo);
-        glBufferData(GL_ELEMENT_ARRAY_BUFFER, GLsizeiptr(scene.edges.size() * sizeof(std::uint32_t)),
-                     scene.edges.data(), GL_DYNAMIC_DRAW);
         glBindBuffer(GL_ARRAY_BUFFER, mSectionVbo);
         glBufferData(GL_ARRAY_BUFFER, GLsizeiptr(scene.section.size() * sizeof(float)), scene.section.data(),
                      GL_DYNAMIC_DRAW);
-        mTriangleCount = int(scene.triangles.size());
-        mEdgeCount = int(scene.edges.size());
         mSectionCount = int(scene.section.size() / 3);
+        // The mean edge length, for the choice of lighting.
+        double sum = 0;
+        for (std::size_t e = 0; e + 1 < scene.edges.size(); e += 2) {
+            const float* a = &scene.vertices[9 * scene.edges[e]];
+            const float* b = &scene.vertices[9 * scene.edges[e + 1]];
+            sum += std::sqrt(double((a[0] - b[0]) * (a[0] - b[0]) + (a[1] - b[1]) * (a[1] - b[1]) + (a[2] - b[2]) * (a[2] - b[2])));
+        }
+        mMeanEdge = scene.edges.empty() ? 0.f : float(sum / double(scene.edges.size() / 2));
+        // The triangles' planes, for cull().
+        const std::size_t nt = scene.triangles.size() / 3;
+        mPlanes.resize(4 * nt);
+        const float* v = scene.vertices.data();
+        for (std::size_t t = 0; t < nt; ++t) {
+            const float* a = v + 9 * scene.triangles[3 * t];
+            const float* b = v + 9 * scene.triangles[3 * t + 1];
+            const float* c = v + 9 * scene.triangles[3 * t + 2];
+            const Vec3f pa(a[0], a[1], a[2]);
+            Vec3f n = (Vec3f(b[0], b[1], b[2]) - pa).cross(Vec3f(c[0], c[1], c[2]) - pa);
+            const float len = n.norm();
+            n = len > 0 ? Vec3f(n / len) : Vec3f::Zero();
+            float* p = &mPlanes[4 * t];
+            p[0] = n.x();
+            p[1] = n.y();
+            p[2] = n.z();
+            p[3] = n.dot(pa);
+        }
+        mCulledVersion = ~0ull;
     }
     if (scene.sliceVersion != mSliceVersion && scene.slice.width > 0) {
         mSliceVersion = scene.sliceVersion;
@@ -227,6 +308,61 @@ void Renderer::upload(const Scene& scene)
     }
 }
 
+void Renderer::cull(const Scene& scene, const Vec3f& eye)
+{
+    // Software WebGL (SwiftShader) shades the vertices and sets up every triangle of a draw before it
+    // culls the back faces: half the mesh's triangles cost that for nothing, and the wireframe's lines
+    // (never culled) all cost a full setup. So the index buffers hold only the triangles that face the
+    // eye, and the edges of those triangles, refilled when the eye or the mesh moves (a pass over the
+    // triangles' planes). GL still culls back faces; the margin keeps the triangles seen edge-on (the
+    // float test may disagree with the rasteriser's about them), so the image is the same.
+    const bool edges = scene.showMesh && scene.wireframe;
+    if (mCulledVersion == mMeshVersion && mCulledEye[0] == eye.x() && mCulledEye[1] == eye.y() &&
+        mCulledEye[2] == eye.z() && (mCulledEdges || !edges))
+        return;
+    mCulledVersion = mMeshVersion;
+    mCulledEye[0] = eye.x();
+    mCulledEye[1] = eye.y();
+    mCulledEye[2] = eye.z();
+    mCulledEdges = edges;
+    const std::size_t nt = mPlanes.size() / 4;
+    float extent = 0;
+    for (int k = 0; k < 3; ++k) extent = std::max(extent, std::abs(eye[k]));
+    const float margin = 1e-4f * std::max(extent, 1.f);
+    mFront.resize(nt);
+    mVisible.resize(scene.triangles.size());
+    std::size_t n = 0;
+    for (std::size_t t = 0; t < nt; ++t) {
+        const float* p = &mPlanes[4 * t];
+        const bool front = p[0] * eye.x() + p[1] * eye.y() + p[2] * eye.z() - p[3] > -margin;
+        mFront[t] = front;
+        if (!front) continue;
+        mVisible[n++] = scene.triangles[3 * t];
+        mVisible[n++] = scene.triangles[3 * t + 1];
+        mVisible[n++] = scene.triangles[3 * t + 2];
+    }
+    glBindVertexArray(mMeshVao); // the triangles are the element buffer of the mesh's vertex array
+    glBindBuffer(GL_ELEMENT_ARRAY_BUFFER, mTriangleIbo);
+    glBufferData(GL_ELEMENT_ARRAY_BUFFER, GLsizeiptr(n * sizeof(std::uint32_t)), mVisible.data(), GL_STREAM_DRAW);
+    glBindVertexArray(0);
+    mTriangleCount = int(n);
+    mEdgeCount = 0;
+    if (!edges) return;
+    const std::size_t ne = scene.edges.size() / 2;
+    const bool faces = scene.edgeFaces.size() == scene.edges.size();
+    mVisible.resize(scene.edges.size());
+    n = 0;
+    for (std::size_t e = 0; e < ne; ++e) {
+        const std::uint32_t f0 = faces ? scene.edgeFaces[2 * e] : ~0u, f1 = faces ? scene.edgeFaces[2 * e + 1] : ~0u;
+        if (f0 < nt && f1 < nt && !mFront[f0] && !mFront[f1]) continue;
+        mVisible[n++] = scene.edges[2 * e];
+        mVisible[n++] = scene.edges[2 * e + 1];
+    }
+    glBindBuffer(GL_ELEMENT_ARRAY_BUFFER, mEdgeIbo);
+    glBufferData(GL_ELEMENT_ARRAY_BUFFER, GLsizeiptr(n * sizeof(std::uint32_t)), mVisible.data(), GL_STREAM_DRAW);
+    mEdgeCount = int(n);
+}
+
 void Renderer::draw(const Scene& scene, int width, int height)
 {
     upload(scene);
@@ -241,15 +377,21 @@ void Renderer::draw(const Scene& scene, int width, int height)
 
     const Mat4f vp = scene.camera.projection(float(width) / float(height)) * scene.camera.view();
     const Vec3f eye = scene.camera.eye();
+    if (scene.showMesh) cull(scene, eye);
 
     if (scene.showMesh && mTriangleCount > 0) {
         // The mesh is closed and oriented outward (counter-clockwise seen from outside): its back
         // faces are always hidden, and culling them halves what software WebGL rasterises.
         glEnable(GL_CULL_FACE);
         glCullFace(GL_BACK);
-        glUseProgram(mMeshProgram);
-        glUniformMatrix4fv(glGetUniformLocation(mMeshProgram, "uViewProjection"), 1, GL_FALSE, vp.data());
-        glUniform3f(glGetUniformLocation(mMeshProgram, "uEye"), eye.x(), eye.y(), eye.z());
+        // Lighting per pixel, or per vertex when the mesh's edges are a few pixels long on the screen
+        // (the mean edge at the camera's target distance under kVertexLitPixels).
+        const float pixelsPerUnit = float(height) / (2.f * scene.camera.distance * std::tan(scene.camera.fovY / 2));
+        const bool perVertex = scene.lighting == 2 || (scene.lighting == 0 && mMeanEdge * pixelsPerUnit < kVertexLitPixels);
+        const GLuint prog = perVertex ? mVertexLitProgram : mMeshProgram;
+        glUseProgram(prog);
+        glUniformMatrix4fv(glGetUniformLocation(prog, "uViewProjection"), 1, GL_FALSE, vp.data());
+        glUniform3f(glGetUniformLocation(prog, "uEye"), eye.x(), eye.y(), eye.z());
         glBindVertexArray(mMeshVao);
         glDrawElements(GL_TRIANGLES, mTriangleCount, GL_UNSIGNED_INT, nullptr);
         glDisable(GL_CULL_FACE);
@@ -283,6 +425,61 @@ void Renderer::draw(const Scene& scene, int width, int height)
     }
     glBindVertexArray(0);
     glUseProgram(0);
+}
+
+void Renderer::beginLayer(int width, int height)
+{
+    if (!mLayerFbo) {
+        glGenFramebuffers(1, &mLayerFbo);
+        glGenTextures(1, &mLayerTexture);
+    }
+    glBindFramebuffer(GL_FRAMEBUFFER, mLayerFbo);
+    if (width != mLayerWidth || height != mLayerHeight) {
+        mLayerWidth = width;
+        mLayerHeight = height;
+        glBindTexture(GL_TEXTURE_2D, mLayerTexture);
+        glTexImage2D(GL_TEXTURE_2D, 0, GL_RGBA8, std::max(width, 1), std::max(height, 1), 0, GL_RGBA,
+                     GL_UNSIGNED_BYTE, nullptr);
+        glTexParameteri(GL_TEXTURE_2D, GL_TEXTURE_MIN_FILTER, GL_NEAREST);
+        glTexParameteri(GL_TEXTURE_2D, GL_TEXTURE_MAG_FILTER, GL_NEAREST);
+        glFramebufferTexture2D(GL_FRAMEBUFFER, GL_COLOR_ATTACHMENT0, GL_TEXTURE_2D, mLayerTexture, 0);
+    }
+    glViewport(0, 0, width, height);
+    glDisable(GL_SCISSOR_TEST);
+    glClearColor(0.f, 0.f, 0.f, 0.f);
+    glClear(GL_COLOR_BUFFER_BIT);
+}
+
+void Renderer::endLayer() { glBindFramebuffer(GL_FRAMEBUFFER, 0); }
+
+void Renderer::compositeLayer(int x0, int y0, int x1, int y1, int width, int height)
+{
+    x0 = std::max(x0, 0);
+    y0 = std::max(y0, 0);
+    x1 = std::min({x1, width, mLayerWidth});
+    y1 = std::min({y1, height, mLayerHeight});
+    if (!mLayerFbo || x1 <= x0 || y1 <= y0) return;
+    const float quad[12] = {float(x0), float(y0), float(x1), float(y0), float(x1), float(y1),
+                            float(x0), float(y0), float(x1), float(y1), float(x0), float(y1)};
+    glViewport(0, 0, width, height);
+    glDisable(GL_DEPTH_TEST);
+    glDisable(GL_CULL_FACE);
+    glDisable(GL_SCISSOR_TEST);
+    glEnable(GL_BLEND);
+    glBlendEquation(GL_FUNC_ADD);
+    glBlendFunc(GL_ONE, GL_ONE_MINUS_SRC_ALPHA);
+    glUseProgram(mLayerProgram);
+    glUniform2f(glGetUniformLocation(mLayerProgram, "uScale"), 2.f / float(width), 2.f / float(height));
+    glActiveTexture(GL_TEXTURE0);
+    glBindTexture(GL_TEXTURE_2D, mLayerTexture);
+    glUniform1i(glGetUniformLocation(mLayerProgram, "uLayer"), 0);
+    glBindVertexArray(mLayerVao);
+    glBindBuffer(GL_ARRAY_BUFFER, mLayerVbo);
+    glBufferData(GL_ARRAY_BUFFER, sizeof quad, quad, GL_STREAM_DRAW);
+    glDrawArrays(GL_TRIANGLES, 0, 6);
+    glBindVertexArray(0);
+    glUseProgram(0);
+    glDisable(GL_BLEND);
 }
 
 void Renderer::finish()

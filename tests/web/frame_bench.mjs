@@ -4,7 +4,8 @@
 // vertices) prints
 //   - draw: the scene's draw alone (mesh, slice, cross-section; then with the wireframe too), each
 //     render waited for by a pixel read back (Module.ccall('riemesh_time_draw', n)): what the mesh
-//     costs the GPU process;
+//     costs the GPU process; and, on builds that have riemesh_time_frame, the whole frame as drawn
+//     while the camera moves (the scene, then the UI composited from its layer);
 //   - frame interval: the time between the page's animation frames (requestAnimationFrame timestamps
 //     over a few seconds; median, mean, 90th percentile) paused (an unchanged image is not drawn
 //     again), paused while the camera orbits (its yaw changes every frame: every frame draws) and while
@@ -58,34 +59,39 @@ try {
     return s;
   };
   // Draw alone: mean of 20 waited-for renders; the median of `rounds` such means.
-  const drawMs = async () => {
+  const drawMs = async (what = 'riemesh_time_draw') => {
     const means = [];
     for (let i = 0; i < rounds; i++)
-      means.push(await page.evaluate(() => Module.ccall('riemesh_time_draw', 'number', ['number'], [20])));
+      means.push(await page.evaluate((what) => Module.ccall(what, 'number', ['number'], [20]), what));
     return median(means);
   };
+  const hasFrame = await page.evaluate(() => typeof Module._riemesh_time_frame === 'function');
   // Animation-frame intervals over `ms` (requestAnimationFrame runs beside the page's own main loop),
   // with the viewer's main-thread time per frame sampled on the way; `during` runs each frame (JS).
   const frames = async (ms, keepEvolving, spin = false) => {
     const r = await page.evaluate(({ ms, keepEvolving, spin }) => new Promise((resolve) => {
       const stamps = [], cpu = [], vertices = [];
       const first = window.riemesh.state().iteration;
+      let last = first;
       const tick = (t) => {
         stamps.push(t);
         const s = window.riemesh.state();
         cpu.push(s.cpuMs);
         vertices.push(s.vertices);
+        last = s.iteration;
         // Keep the model moving: setting a parameter clears a convergence (the mesh evolves again).
         if (keepEvolving && s.state !== 'evolving') window.riemesh.set('inflation', 1.0);
         if (spin) window.riemesh.set('camera_yaw', -1.1 + 0.3 * Math.sin(0.01 * stamps.length));
         if (t - stamps[0] < ms) requestAnimationFrame(tick);
-        else resolve({ stamps, cpu, vertices, iterations: s.iteration - first });
+        else resolve({ stamps, cpu, vertices, iterations: last - first });
       };
       requestAnimationFrame(tick);
     }), { ms, keepEvolving, spin });
     const dt = r.stamps.slice(1).map((t, i) => t - r.stamps[i]);
     dt.sort((a, b) => a - b);
+    const seconds = (r.stamps[r.stamps.length - 1] - r.stamps[0]) / 1000;
     return {
+      perSecond: r.iterations / seconds,
       median: median(dt), mean: dt.reduce((a, b) => a + b, 0) / dt.length, p90: dt[Math.floor(0.9 * (dt.length - 1))],
       cpu: median(r.cpu.slice(1)), frames: dt.length, iterations: r.iterations,
       vmin: Math.min(...r.vertices), vmax: Math.max(...r.vertices),
@@ -94,13 +100,15 @@ try {
   // The same while the camera orbits: its yaw swings about the home view and changes every animation
   // frame (a mouse drag at full rate), so every frame draws the whole scene.
   const orbit = (ms) => frames(ms, false, true);
-  const report = (label, s, draw, drawWire, paused, orbiting, evolving) => {
+  const report = (label, s, draw, drawWire, drawFrame, paused, orbiting, evolving) => {
     console.log(`frame_bench: ${label}: ${s.vertices} vertices, ${s.iteration} iterations (${s.state})`);
-    console.log(`frame_bench:   draw ${fmt(draw)} ms, with the wireframe ${fmt(drawWire)} ms (mean of 20 waited-for renders, median of ${rounds})`);
+    console.log(`frame_bench:   draw ${fmt(draw)} ms, with the wireframe ${fmt(drawWire)} ms` +
+      (drawFrame === undefined ? '' : `, whole frame (scene + UI from its layer) ${fmt(drawFrame)} ms`) +
+      ` (mean of 20 waited-for renders, median of ${rounds})`);
     const line = (what, f) => console.log(
       `frame_bench:   ${what} frame interval median ${fmt(f.median)} ms, mean ${fmt(f.mean)}, p90 ${fmt(f.p90)} ` +
       `(${f.frames} frames; viewer main thread ${fmt(f.cpu)} ms/frame` +
-      (f.iterations ? `; ${f.iterations} iterations, ${f.vmin}..${f.vmax} vertices)` : ')'));
+      (f.iterations ? `; ${f.iterations} iterations, ${f.perSecond.toFixed(1)}/s, ${f.vmin}..${f.vmax} vertices)` : ')'));
     line('paused  ', paused);
     line('orbiting', orbiting);
     if (evolving) line('evolving', evolving);
@@ -110,6 +118,7 @@ try {
     await sleep(500);
     const s = await state();
     const draw = await drawMs();
+    const drawFrame = hasFrame ? await drawMs('riemesh_time_frame') : undefined;
     await page.evaluate(() => window.riemesh.set('wireframe', 1));
     const drawWire = await drawMs();
     await page.evaluate(() => window.riemesh.set('wireframe', 0));
@@ -122,7 +131,7 @@ try {
     for (let i = 0; i < rounds; i++) evolving.push(await frames(2000, true));
     await page.evaluate(() => window.riemesh.pause());
     const pick = (xs) => xs.sort((a, b) => a.median - b.median)[Math.floor(xs.length / 2)];
-    report(label, s, draw, drawWire, pick(paused), pick(orbiting), pick(evolving));
+    report(label, s, draw, drawWire, drawFrame, pick(paused), pick(orbiting), pick(evolving));
   };
 
   // The demo's coarse mesh (the paper's phantom with its metric), once it has converged.
