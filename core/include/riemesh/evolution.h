@@ -43,9 +43,10 @@ struct EvolutionOptions {
     ForceOptions forces;
     double mass = 1.0;
     double damping = 0.5;
-    /// Renumber the mesh along a space-filling curve (reorderForLocality) at the first step and
-    /// whenever splits have appended a quarter of it since: on large evolved meshes this makes an
-    /// iteration about 1.5-2x faster (core_bench). Off: handles change only by compaction.
+    /// Renumber a large mesh (16k vertices and more) along a space-filling curve (reorderForLocality)
+    /// at the first step and whenever splits have appended a quarter of it since: on large evolved
+    /// meshes this makes an iteration about 1.5-2x faster (core_bench). Off: handles change only by
+    /// compaction.
     bool renumber = true;
     int maxIterations = 3000;
     int minIterations = 20;
