@@ -12,6 +12,7 @@
 
 #include <algorithm>
 #include <array>
+#include <cmath>
 #include <limits>
 
 namespace riemesh {
@@ -528,7 +529,7 @@ int removeSmallComponents(Mesh& mesh, std::size_t minVertices, double minVolume)
     std::vector<char> doomed(count, 0);
     int removed = 0;
     for (int i = 0; i < count; ++i) {
-        if (vertices[i] < minVertices || volume[i] < minVolume) {
+        if (vertices[i] < minVertices || std::abs(volume[i]) < minVolume) {
             doomed[i] = 1;
             ++removed;
         }
