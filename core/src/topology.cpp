@@ -277,7 +277,7 @@ bool zipBand(const Mesh& mesh, const std::vector<VertexHandle>& a, const std::ve
 /// the one-rings of u and w), beyond the vertices and edges they share (exact tests, see
 /// riemesh/self_intersection.h). A band that folds or twists, or cuts through a nearby sheet,
 /// would leave the surface self-intersecting.
-bool isBandEmbedded(const Mesh& mesh, VertexHandle u, VertexHandle w, const std::vector<Triangle>& band)
+bool isBandEmbedded(const Mesh& mesh, const std::vector<FaceHandle>& nearby, const std::vector<Triangle>& band)
 {
     using detail::TriangleRef;
     auto corners = [&](const Triangle& t) {
@@ -295,11 +295,9 @@ bool isBandEmbedded(const Mesh& mesh, VertexHandle u, VertexHandle w, const std:
         for (std::size_t j = i + 1; j < band.size(); ++j)
             if (detail::classifyTriangles(ids(band[i]), refs[i], ids(band[j]), refs[j]) != detail::TriangleContact::None)
                 return false;
-    // The faces that stay, near the band: one pass over the face list, as cheap as the backup copy
-    // merge makes anyway (merges are rare events).
-    for (auto f : mesh.faces()) {
+    // The faces that stay, near the band.
+    for (const FaceHandle f : nearby) {
         const Triangle t = faceVertices(mesh, f);
-        if (std::find(t.begin(), t.end(), u) != t.end() || std::find(t.begin(), t.end(), w) != t.end()) continue;
         Eigen::AlignedBox3d faceBox;
         for (auto v : t) faceBox.extend(position(mesh, v));
         if (!box.intersects(faceBox)) continue;
@@ -324,6 +322,20 @@ bool chooseBand(const Mesh& mesh, VertexHandle u, VertexHandle w, std::vector<Tr
         double length;
         int i0, j0;
     };
+    // Every zip's band joins vertices of the two loops: the faces that stay and could cross one lie
+    // in the loops' bounding box, found in one pass over the faces (not one per zip: a tangled
+    // surface has high-valence loops and tries hundreds of zips).
+    Eigen::AlignedBox3d loops;
+    for (const auto& loop : {a, b})
+        for (const VertexHandle v : loop) loops.extend(position(mesh, v));
+    std::vector<FaceHandle> nearby;
+    for (auto f : mesh.faces()) {
+        const Triangle t = faceVertices(mesh, f);
+        if (std::find(t.begin(), t.end(), u) != t.end() || std::find(t.begin(), t.end(), w) != t.end()) continue;
+        Eigen::AlignedBox3d faceBox;
+        for (auto v : t) faceBox.extend(position(mesh, v));
+        if (loops.intersects(faceBox)) nearby.push_back(f);
+    }
     std::vector<Zip> zips;
     std::vector<Triangle> faces;
     for (int i0 = 0; i0 < int(a.size()); ++i0)
@@ -337,7 +349,7 @@ bool chooseBand(const Mesh& mesh, VertexHandle u, VertexHandle w, std::vector<Tr
     for (const Zip& z : zips) {
         double length = 0;
         zipBand(mesh, a, b, z.i0, z.j0, band, length);
-        if (isBandEmbedded(mesh, u, w, band)) return true;
+        if (isBandEmbedded(mesh, nearby, band)) return true;
     }
     band.clear();
     return false;
