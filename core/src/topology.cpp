@@ -12,7 +12,6 @@
 
 #include <algorithm>
 #include <array>
-#include <cmath>
 #include <limits>
 
 namespace riemesh {
@@ -541,7 +540,7 @@ int removeSmallComponents(Mesh& mesh, std::size_t minVertices, double minVolume)
     std::vector<char> doomed(count, 0);
     int removed = 0;
     for (int i = 0; i < count; ++i) {
-        if (vertices[i] < minVertices || std::abs(volume[i]) < minVolume) {
+        if (vertices[i] < minVertices || volume[i] < minVolume) {
             doomed[i] = 1;
             ++removed;
         }

@@ -383,36 +383,3 @@ TEST_CASE("merge: the band never crosses itself or the surface, even between til
     MESSAGE("tilted merges: " << merged << " merged, " << refused << " refused");
     CHECK(merged > 50);
 }
-
-TEST_CASE("topology: small components are removed whatever their orientation, a cavity's inner surface is kept")
-{
-    // A hollow ball: outer sphere (outward) and a large inner sphere turned inward (a cavity),
-    // plus a speck outside and a small inside-out speck (a tangled remnant): 4 components.
-    auto inverted = [](const Mesh& src) {
-        Mesh out;
-        prepareMesh(out);
-        std::vector<VertexHandle> map;
-        for (auto v : src.vertices()) map.push_back(out.add_vertex(src.point(v)));
-        for (auto f : src.faces()) {
-            std::vector<VertexHandle> corners;
-            for (auto v : src.fv_range(f)) corners.push_back(map[std::size_t(v.idx())]);
-            out.add_face(corners[2], corners[1], corners[0]);
-        }
-        return out;
-    };
-    Mesh mesh = makeIcosphere(Vec3::Zero(), 10.0, 3);
-    prepareMesh(mesh);
-    appendMesh(mesh, inverted(makeIcosphere(Vec3::Zero(), 6.0, 3)));
-    appendMesh(mesh, makeIcosphere(Vec3(30, 0, 0), 0.2, 1));
-    appendMesh(mesh, inverted(makeIcosphere(Vec3(-30, 0, 0), 0.2, 1)));
-    REQUIRE(topologyOf(mesh).components == 4);
-    const double cavity = signedVolume(mesh); // outer - inner - specks, before
-    CHECK(removeSmallComponents(mesh, 6, 0.5) == 2);
-    mesh.garbage_collection();
-    const auto t = topologyOf(mesh);
-    CHECK(t.components == 2);
-    CHECK(t.genus == 0);
-    const double expected = 4.0 / 3.0 * M_PI * (1000.0 - 216.0);
-    CHECK(signedVolume(mesh) == doctest::Approx(expected).epsilon(0.03));
-    CHECK(signedVolume(mesh) == doctest::Approx(cavity).epsilon(1e-3));
-}
