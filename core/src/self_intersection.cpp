@@ -108,6 +108,7 @@ bool trianglesIntersect(const Vec3& a0, const Vec3& a1, const Vec3& a2, const Ve
 SelfIntersectionStats findSelfIntersections(const Mesh& mesh, const SelfIntersectionOptions& options)
 {
     SelfIntersectionStats stats;
+    if (mesh.n_vertices() == 0) return stats; // (points() is null then)
     FaceSet faces;
     const double* const xyz = mesh.points()[0].data();
     static_assert(sizeof(Mesh::Point) == 3 * sizeof(double), "points are 3 packed doubles");

@@ -263,3 +263,15 @@ TEST_CASE("self-intersection: a 80k-face sphere and a fine torus are embedded")
     CHECK(stats.testedPairs >= sphere.n_faces() * 6); // each face's 12 vertex neighbours, each pair once
     CHECK(findSelfIntersections(makeTorus(Vec3::Zero(), 5, 1, 400, 80)).count() == 0);
 }
+
+TEST_CASE("self-intersections: an empty mesh (a model that vanished) has none")
+{
+    Mesh mesh;
+    prepareMesh(mesh);
+    SelfIntersectionOptions options;
+    options.collectPairs = true;
+    const auto stats = findSelfIntersections(mesh, options);
+    CHECK(stats.count() == 0);
+    CHECK(stats.testedPairs == 0);
+    CHECK(stats.pairs.empty());
+}
