@@ -45,13 +45,11 @@ Mat3 VertexMetrics::at(VertexHandle v) const
     const Mesh::Point& p = mMesh.point(v);
     if (!mHasCache) return mMetric.at(toVec3(p));
     if (const VertexMetric& cached = mMesh.property(mCache, v); cached.at == p) return cached.g;
-    const Mat3 g = mMetric.at(toVec3(p));
-    if (mWritable) {
-        VertexMetric& entry = mWritable->property(mCache, v);
-        entry.g = g;
-        entry.at = p;
-    }
-    return g;
+    if (!mWritable) return mMetric.at(toVec3(p));
+    VertexMetric& entry = mWritable->property(mCache, v);
+    entry.g = mMetric.at(toVec3(p));
+    entry.at = p;
+    return entry.g;
 }
 
 std::size_t VertexMetrics::update()
@@ -59,11 +57,8 @@ std::size_t VertexMetrics::update()
     if (!mWritable || !mHasCache) return 0;
     std::size_t sampled = 0;
     for (auto v : mMesh.vertices()) {
-        VertexMetric& entry = mWritable->property(mCache, v);
-        const Mesh::Point& p = mMesh.point(v);
-        if (entry.at == p) continue;
-        entry.g = mMetric.at(toVec3(p));
-        entry.at = p;
+        if (mMesh.property(mCache, v).at == mMesh.point(v)) continue;
+        at(v);
         ++sampled;
     }
     return sampled;

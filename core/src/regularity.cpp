@@ -78,27 +78,9 @@ public:
         return lengthBetween(mMesh.from_vertex_handle(h), mMesh.to_vertex_handle(h));
     }
 
-    /// G at vertex v, read once per call (from the mesh's VertexMetrics cache, sampled when the
-    /// vertex moved) and kept by vertex index (a collapse that moves the kept vertex forgets it):
-    /// edges are measured many times per call, vertices move only through collapses.
-    Mat3 vertexMetric(VertexHandle v) const // by value: a later call may grow the cache
-    {
-        const std::size_t i = std::size_t(v.idx());
-        if (i >= mHaveG.size()) {
-            mHaveG.resize(mMesh.n_vertices(), 0);
-            mG.resize(mMesh.n_vertices());
-        }
-        if (!mHaveG[i]) {
-            mG[i] = mVertexMetrics.at(v);
-            mHaveG[i] = 1;
-        }
-        return mG[i];
-    }
-
-    void forgetMetric(VertexHandle v)
-    {
-        if (std::size_t(v.idx()) < mHaveG.size()) mHaveG[std::size_t(v.idx())] = 0;
-    }
+    /// G at vertex v: the mesh's VertexMetrics cache, sampled again only when the vertex moved (a
+    /// collapse moves the kept vertex; splits add new ones).
+    Mat3 vertexMetric(VertexHandle v) const { return mVertexMetrics.at(v); }
 
     /// Metric length between two vertices with G at the edge midpoint approximated by the mean of
     /// the endpoint tensors (second order in the edge length for a smooth metric; exact for a
@@ -387,7 +369,6 @@ private:
     void collapseAndRequeue(HalfedgeHandle hh, const Vec3& target)
     {
         const VertexHandle kept = detail::collapseUnchecked(mMesh, hh, target);
-        forgetMetric(kept);
         ++mCollapses;
         updateRing(kept);
         for (auto oh = mMesh.cvoh_begin(kept); oh.is_valid(); ++oh) {
@@ -518,8 +499,6 @@ private:
     double mHi; ///< zeta * delta (metric length)
     std::vector<QueuedEdge> mLong, mShort;
     std::vector<int> mValence; ///< by vertex idx(), kept up to date by every edit
-    mutable std::vector<Mat3> mG;       ///< G at each vertex (see vertexMetric), by vertex idx()
-    mutable std::vector<char> mHaveG;   ///< mG[i] is up to date
     static constexpr signed char kFits = 0, kLong = 1, kShort = -1;
     std::vector<signed char> mClass;  ///< by edge idx(): the class of its last measurement
     std::vector<char> mTouched;       ///< by vertex idx(): changed since the last measurement

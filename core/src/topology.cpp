@@ -321,20 +321,6 @@ bool chooseBand(const Mesh& mesh, VertexHandle u, VertexHandle w, std::vector<Tr
         double length;
         int i0, j0;
     };
-    // Every zip's band joins vertices of the two loops: the faces that stay and could cross one lie
-    // in the loops' bounding box, found in one pass over the faces (not one per zip: a tangled
-    // surface has high-valence loops and tries hundreds of zips).
-    Eigen::AlignedBox3d loops;
-    for (const auto& loop : {a, b})
-        for (const VertexHandle v : loop) loops.extend(position(mesh, v));
-    std::vector<FaceHandle> nearby;
-    for (auto f : mesh.faces()) {
-        const Triangle t = faceVertices(mesh, f);
-        if (std::find(t.begin(), t.end(), u) != t.end() || std::find(t.begin(), t.end(), w) != t.end()) continue;
-        Eigen::AlignedBox3d faceBox;
-        for (auto v : t) faceBox.extend(position(mesh, v));
-        if (loops.intersects(faceBox)) nearby.push_back(f);
-    }
     std::vector<Zip> zips;
     std::vector<Triangle> faces;
     for (int i0 = 0; i0 < int(a.size()); ++i0)
@@ -345,6 +331,21 @@ bool chooseBand(const Mesh& mesh, VertexHandle u, VertexHandle w, std::vector<Tr
     std::sort(zips.begin(), zips.end(), [](const Zip& x, const Zip& y) {
         return x.length != y.length ? x.length < y.length : std::make_pair(x.i0, x.j0) < std::make_pair(y.i0, y.j0);
     });
+    // Every zip's band joins vertices of the two loops: the faces that stay and could cross one lie
+    // in the loops' bounding box, found in one pass over the faces (not one per zip: a tangled
+    // surface has high-valence loops and tries hundreds of zips).
+    Eigen::AlignedBox3d loops;
+    for (const auto* loop : {&a, &b})
+        for (const VertexHandle v : *loop) loops.extend(position(mesh, v));
+    std::vector<FaceHandle> nearby;
+    if (!zips.empty())
+        for (auto f : mesh.faces()) {
+            const Triangle t = faceVertices(mesh, f);
+            if (std::find(t.begin(), t.end(), u) != t.end() || std::find(t.begin(), t.end(), w) != t.end()) continue;
+            Eigen::AlignedBox3d faceBox;
+            for (auto v : t) faceBox.extend(position(mesh, v));
+            if (loops.intersects(faceBox)) nearby.push_back(f);
+        }
     for (const Zip& z : zips) {
         double length = 0;
         zipBand(mesh, a, b, z.i0, z.j0, band, length);
