@@ -1,5 +1,6 @@
 #include "riemesh/image.h"
 #include "riemesh/metric.h"
+#include "riemesh/primitives.h"
 
 #include <doctest/doctest.h>
 
@@ -73,4 +74,38 @@ TEST_CASE("metric: a mesh edge is measured with the mean of the endpoint tensors
     mesh.add_face(a, b, c);
     const auto e = mesh.edge_handle(mesh.find_halfedge(a, b));
     CHECK(metricLength(m, mesh, e) == doctest::Approx(2.0 * std::sqrt(2.5)));
+}
+
+TEST_CASE("metric: VertexMetrics samples G once per vertex position and again when a vertex moves")
+{
+    using namespace riemesh;
+    int calls = 0;
+    FunctionMetric metric([&calls](const Vec3& x) {
+        ++calls;
+        return Mat3(Mat3::Identity() * (1.0 + x.squaredNorm()));
+    }, 1e6);
+    Mesh mesh = makeIcosphere(Vec3::Zero(), 2.0, 1);
+    prepareMesh(mesh);
+    const int n = int(mesh.n_vertices());
+    VertexMetrics cache(mesh, metric);
+    CHECK(cache.update() == std::size_t(n));
+    CHECK(calls == n);
+    CHECK(cache.update() == 0); // nothing moved
+    const VertexHandle v(3);
+    const Mat3 before = cache.at(v);
+    CHECK(calls == n);
+    CHECK(before.isApprox(metric.at(position(mesh, v))));
+    --calls; // the direct call above
+    mesh.point(v) *= 1.5;
+    const VertexMetrics reader(static_cast<const Mesh&>(mesh), metric); // read-only: samples, stores nothing
+    CHECK(reader.at(v).isApprox(Mat3::Identity() * (1.0 + position(mesh, v).squaredNorm())));
+    CHECK(calls == n + 1);
+    CHECK(cache.update() == 1); // only the moved vertex
+    CHECK(calls == n + 2);
+    CHECK(reader.at(v).isApprox(Mat3::Identity() * (1.0 + position(mesh, v).squaredNorm())));
+    CHECK(calls == n + 2); // now cached
+    EuclideanMetric euclidean;
+    VertexMetrics none(mesh, euclidean);
+    CHECK(none.update() == 0);
+    CHECK(none.at(v).isIdentity());
 }

@@ -1,5 +1,6 @@
 #include "mesh_invariants.h"
 #include "riemesh/edge_ops.h"
+#include "riemesh/evolution.h"
 #include "riemesh/primitives.h"
 
 #include <doctest/doctest.h>
@@ -150,4 +151,37 @@ TEST_CASE("mesh: renumbering for locality keeps the surface, its topology and th
     const int gapAfter = medianEdgeGap(mesh);
     MESSAGE("median index gap between edge endpoints: " << gapBefore << " -> " << gapAfter);
     CHECK(gapAfter * 4 < gapBefore);
+}
+
+TEST_CASE("evolution: a large mesh is renumbered for locality at the first step, unless told not to; each step's phases add up to its time")
+{
+    // A 40,962-vertex icosphere (over the 16k-vertex threshold) at rest on a ball's contour.
+    const double radius = 30;
+    const FunctionImage image([&](const Vec3& x) { return 0.5 + 0.5 * std::tanh(radius - x.norm()); },
+                              Box3(Vec3::Constant(-40), Vec3::Constant(40)), 1.0);
+    EuclideanMetric metric;
+    int gaps[2];
+    for (const bool renumber : {true, false}) {
+        Mesh mesh = makeIcosphere(Vec3::Zero(), radius, 6);
+        REQUIRE(mesh.n_vertices() > 16384u);
+        EvolutionOptions o;
+        o.delta = 0.45;
+        o.renumber = renumber;
+        Evolution evolution(mesh, image, metric, o);
+        const IterationStats it = evolution.step();
+        REQUIRE_MESH_OK(mesh);
+        gaps[renumber ? 0 : 1] = medianEdgeGap(mesh);
+        const auto& p = it.phases;
+        CHECK(p.forces >= 0);
+        CHECK(p.integration >= 0);
+        CHECK(p.regularity >= 0);
+        CHECK(p.collisions >= 0);
+        CHECK(p.topology >= 0);
+        CHECK(p.forces + p.integration + p.regularity + p.collisions + p.topology ==
+              doctest::Approx(it.milliseconds).epsilon(1e-9));
+        CHECK(it.milliseconds > 0);
+    }
+    MESSAGE("median index gap between edge endpoints after one step: " << gaps[0] << " renumbered, " << gaps[1]
+                                                                      << " as is");
+    CHECK(gaps[0] * 4 < gaps[1]);
 }
