@@ -98,7 +98,7 @@ private:
     int mLastTopologyEvent = 0;
     int mLastCut = 0;   ///< iteration of the last tunnel cut (0: none)
     int mLastMerge = 0; ///< iteration of the last merge (0: none)
-    std::size_t mAppended = 0; ///< vertices added by splits since the mesh was last renumbered
+    std::size_t mChurn = 0; ///< splits and collapses since the mesh was last renumbered
     void updateConvergence();
 };
 
