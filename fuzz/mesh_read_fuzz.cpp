@@ -18,7 +18,7 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
     fuzz::expectCleanRefusal([&] {
         const Mesh mesh = readMeshFromBytes(bytes, format, "fuzz");
         testing::InvariantOptions options;
-        options.requirePositiveVolume = false; // only the whole mesh is turned outward
+        options.requireOutward = false; // only the whole mesh is turned outward
         // The reader promises topology (closed, manifold, consistently oriented, no pillows), not
         // geometry: coincident points make zero-area faces, legal in a file (only NaN areas, from
         // overflowing coordinates, are still listed; they are ignored below too).

@@ -146,6 +146,51 @@ double signedVolume(const Mesh& mesh)
     return volume / 6.0;
 }
 
+double windingNumber(const Mesh& mesh, const Vec3& x, const std::vector<int>* label, int skip)
+{
+    double sum = 0;
+    for (auto f : mesh.faces()) {
+        const auto h = mesh.halfedge_handle(f);
+        const VertexHandle va = mesh.from_vertex_handle(h);
+        if (label && (*label)[std::size_t(va.idx())] == skip) continue;
+        // Van Oosterom and Strackee: tan(omega / 2) = a.(b x c) / (|a||b||c| + (a.b)|c| + ...).
+        const Vec3 a = position(mesh, va) - x, b = position(mesh, mesh.to_vertex_handle(h)) - x,
+                   c = position(mesh, mesh.to_vertex_handle(mesh.next_halfedge_handle(h))) - x;
+        const double la = a.norm(), lb = b.norm(), lc = c.norm();
+        const double num = a.dot(b.cross(c));
+        const double den = la * lb * lc + a.dot(b) * lc + b.dot(c) * la + c.dot(a) * lb;
+        sum += 2 * std::atan2(num, den);
+    }
+    return sum / (4 * M_PI);
+}
+
+std::vector<ComponentShape> componentShapes(const Mesh& mesh, const std::vector<int>& label, int count)
+{
+    std::vector<ComponentShape> shapes(std::size_t(std::max(count, 0)));
+    std::vector<Eigen::AlignedBox3d> bounds(shapes.size());
+    std::vector<VertexHandle> sample(shapes.size());
+    for (auto v : mesh.vertices()) {
+        const std::size_t i = std::size_t(label[std::size_t(v.idx())]);
+        ++shapes[i].vertices;
+        bounds[i].extend(position(mesh, v));
+        sample[i] = v;
+    }
+    for (auto f : mesh.faces()) {
+        const auto h = mesh.halfedge_handle(f);
+        const VertexHandle va = mesh.from_vertex_handle(h);
+        const Vec3 a = position(mesh, va), b = position(mesh, mesh.to_vertex_handle(h)),
+                   c = position(mesh, mesh.to_vertex_handle(mesh.next_halfedge_handle(h)));
+        shapes[std::size_t(label[std::size_t(va.idx())])].volume += a.dot(b.cross(c)) / 6.0;
+    }
+    for (std::size_t i = 0; i < shapes.size(); ++i) {
+        bool nested = false;
+        for (std::size_t j = 0; j < shapes.size() && !nested; ++j) nested = j != i && bounds[j].contains(bounds[i]);
+        if (nested)
+            shapes[i].enclosure = int(std::lround(windingNumber(mesh, position(mesh, sample[i]), &label, int(i))));
+    }
+    return shapes;
+}
+
 Vec3 faceNormal(const Mesh& mesh, FaceHandle f)
 {
     auto h = mesh.halfedge_handle(f);

@@ -530,18 +530,12 @@ int removeSmallComponents(Mesh& mesh, std::size_t minVertices, double minVolume)
     int count = 0;
     const std::vector<int> label = componentLabels(mesh, &count);
     if (count <= 1 && minVertices <= 4 && minVolume <= 0) return 0;
-    std::vector<std::size_t> vertices(count, 0);
-    std::vector<double> volume(count, 0.0);
-    for (auto v : mesh.vertices()) ++vertices[label[v.idx()]];
-    for (auto f : mesh.faces()) {
-        const auto corners = faceVertices(mesh, f);
-        const Vec3 a = position(mesh, corners[0]), b = position(mesh, corners[1]), c = position(mesh, corners[2]);
-        volume[label[corners[0].idx()]] += a.dot(b.cross(c)) / 6.0;
-    }
-    std::vector<char> doomed(count, 0);
+    const std::vector<ComponentShape> shapes = componentShapes(mesh, label, count);
+    std::vector<char> doomed(std::size_t(count), 0);
     int removed = 0;
-    for (int i = 0; i < count; ++i) {
-        if (vertices[i] < minVertices || volume[i] < minVolume) {
+    for (std::size_t i = 0; i < shapes.size(); ++i) {
+        const ComponentShape& c = shapes[i];
+        if (c.vertices < minVertices || std::abs(c.volume) < minVolume || !c.outward()) {
             doomed[i] = 1;
             ++removed;
         }

@@ -10,6 +10,7 @@
 #include <doctest/doctest.h>
 
 #include <cmath>
+#include <numeric>
 
 using namespace riemesh;
 
@@ -195,6 +196,54 @@ TEST_CASE("evolution: a coarse Euclidean model punches through a thin plate, an 
         INFO("pairs across the plate: euclidean " << euclideanAcross << ", riemannian " << riemannianAcross);
         CHECK(euclideanAcross > 0);
         CHECK(riemannianAcross == 0);
+    }
+}
+
+TEST_CASE("evolution: a closed cavity's inner wall survives the cuts elsewhere in the model")
+{
+    // A hollow ball (walls between r = 3.5 and 7) and a solid ball beside it. The box deflates onto
+    // both and pinches between them (a cut, after which specks are removed); a bubble turned
+    // inside out inflates in the cavity onto its wall. The wall encloses negative volume inside
+    // the hollow ball's outer surface: a cavity, not a speck or a component turned inside out.
+    const Vec3 hollow(-9, 0, 0), solid(9, 0, 0);
+    const auto image = fogImage(
+        [&](const Vec3& x) {
+            return std::max(std::min(ballSdf(x, hollow, 7), -ballSdf(x, hollow, 3.5)), ballSdf(x, solid, 5));
+        },
+        Box3(Vec3(-18, -9, -9), Vec3(16, 9, 9)));
+    Mesh mesh = makeInitialBox(image, 2.0);
+    Mesh bubble = makeIcosphere(hollow, 1.5, 2);
+    Mesh inward;
+    for (auto v : bubble.vertices()) inward.add_vertex(bubble.point(v));
+    for (auto f : bubble.faces()) {
+        std::vector<VertexHandle> corners;
+        for (auto v : bubble.fv_range(f)) corners.insert(corners.begin(), v);
+        inward.add_face(corners);
+    }
+    appendMesh(mesh, inward);
+    REQUIRE_MESH_OK(mesh);
+    EuclideanMetric metric;
+    const auto stats = runChecked(mesh, image, metric, baseOptions(1.0));
+    const auto t = topologyOf(mesh);
+    INFO("merges " << stats.merges << " cuts " << stats.cuts << " removed "
+                   << std::accumulate(stats.iterations.begin(), stats.iterations.end(), 0,
+                                      [](int n, const IterationStats& it) { return n + it.removedComponents; }));
+    CHECK(stats.cuts >= 1);
+    REQUIRE(t.components == 3);
+    CHECK(t.genus == 0);
+    // The cavity's wall sits on the sphere r = 3.5 around the hollow ball's centre.
+    int count = 0;
+    const auto label = componentLabels(mesh, &count);
+    const auto shapes = componentShapes(mesh, label, count);
+    for (std::size_t i = 0; i < shapes.size(); ++i) {
+        if (shapes[i].volume > 0) continue;
+        double sum = 0;
+        std::size_t n = 0;
+        for (auto v : mesh.vertices())
+            if (label[std::size_t(v.idx())] == int(i)) sum += std::abs((position(mesh, v) - hollow).norm() - 3.5), ++n;
+        INFO("cavity wall: " << n << " vertices, mean distance " << sum / double(n));
+        CHECK(sum / double(n) < 0.2);
+        CHECK(shapes[i].enclosure == 1);
     }
 }
 

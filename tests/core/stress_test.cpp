@@ -338,31 +338,13 @@ std::unique_ptr<MetricField> makeMetric(const StressCase& c)
     return nullptr;
 }
 
-/// Generalised winding number of `mesh`'s faces outside component `skip` around p.
-double windingNumber(const Mesh& mesh, const std::vector<int>& label, int skip, const Vec3& p)
-{
-    double sum = 0;
-    for (auto f : mesh.faces()) {
-        auto h = mesh.halfedge_handle(f);
-        const VertexHandle va = mesh.from_vertex_handle(h);
-        if (label[va.idx()] == skip) continue;
-        const Vec3 a = position(mesh, va) - p, b = position(mesh, mesh.to_vertex_handle(h)) - p,
-                   c = position(mesh, mesh.to_vertex_handle(mesh.next_halfedge_handle(h))) - p;
-        const double la = a.norm(), lb = b.norm(), lc = c.norm();
-        const double num = a.dot(b.cross(c));
-        const double den = la * lb * lc + a.dot(b) * lc + b.dot(c) * la + c.dot(a) * lb;
-        sum += 2 * std::atan2(num, den);
-    }
-    return sum / (4 * M_PI);
-}
-
 /// The structural invariants of tests/support: closed, 2-manifold, no degenerate face, finite
 /// positions (orientation is judged by orientationProblem). Empty string when all hold.
 std::string structuralProblem(const Mesh& mesh)
 {
     if (mesh.n_faces() == 0) return "the mesh vanished";
     testing::InvariantOptions io;
-    io.requirePositiveVolume = false;
+    io.requireOutward = false;
     const auto report = testing::checkInvariants(mesh, io);
     return report.ok() ? std::string() : report.text();
 }
@@ -386,7 +368,7 @@ std::string orientationProblem(const Mesh& mesh)
     }
     for (int i = 0; i < count; ++i) {
         if (volume[i] > 0) continue;
-        const double w = windingNumber(mesh, label, i, position(mesh, sample[i]));
+        const double w = windingNumber(mesh, position(mesh, sample[i]), &label, i);
         if (std::abs(w - 1) > 0.1) {
             std::ostringstream s;
             s << "component " << i << " of " << count << " encloses volume " << volume[i]

@@ -383,3 +383,78 @@ TEST_CASE("merge: the band never crosses itself or the surface, even between til
     MESSAGE("tilted merges: " << merged << " merged, " << refused << " refused");
     CHECK(merged > 50);
 }
+
+namespace {
+
+/// `mesh` with every face turned over: the same sphere, oriented inward (a cavity's wall, or
+/// a component turned inside out).
+Mesh turnedOver(const Mesh& mesh)
+{
+    Mesh out;
+    for (auto v : mesh.vertices()) out.add_vertex(mesh.point(v));
+    for (auto f : mesh.faces()) {
+        std::vector<VertexHandle> corners;
+        for (auto v : mesh.fv_range(f)) corners.push_back(v);
+        std::reverse(corners.begin(), corners.end());
+        out.add_face(corners);
+    }
+    return out;
+}
+
+} // namespace
+
+TEST_CASE("componentShapes: a cavity's wall is outward, a component turned inside out or a solid inside a solid is not")
+{
+    Mesh shell = makeIcosphere(Vec3::Zero(), 5.0, 3);
+    appendMesh(shell, turnedOver(makeIcosphere(Vec3(0.5, 0, 0), 2.0, 2))); // the cavity
+    appendMesh(shell, makeIcosphere(Vec3(0.5, 0, 0), 1.0, 2));              // a solid in the cavity
+    int count = 0;
+    auto label = componentLabels(shell, &count);
+    REQUIRE(count == 3);
+    auto shapes = componentShapes(shell, label, count);
+    CHECK(shapes[0].volume > 0);
+    CHECK(shapes[0].enclosure == 0);
+    CHECK(shapes[1].volume < 0);
+    CHECK(shapes[1].enclosure == 1);
+    CHECK(shapes[2].volume > 0);
+    CHECK(shapes[2].enclosure == 0); // inside the solid (+1) and inside the cavity (-1)
+    for (const auto& s : shapes) CHECK(s.outward());
+    CHECK_MESH_OK(shell);
+
+    Mesh alone = turnedOver(makeIcosphere(Vec3::Zero(), 2.0, 2)); // inside out, enclosed by nothing
+    label = componentLabels(alone, &count);
+    shapes = componentShapes(alone, label, count);
+    CHECK(shapes[0].enclosure == 0);
+    CHECK_FALSE(shapes[0].outward());
+    CHECK_FALSE(testing::checkInvariants(alone).ok());
+
+    Mesh nested = makeIcosphere(Vec3::Zero(), 5.0, 3); // a solid inside a solid
+    appendMesh(nested, makeIcosphere(Vec3(1, 0, 0), 2.0, 2));
+    label = componentLabels(nested, &count);
+    shapes = componentShapes(nested, label, count);
+    CHECK(shapes[0].outward());
+    CHECK(shapes[1].enclosure == 1);
+    CHECK_FALSE(shapes[1].outward());
+    CHECK(windingNumber(nested, Vec3(1, 0, 0)) == doctest::Approx(2.0).epsilon(1e-9));
+    CHECK(windingNumber(nested, Vec3(0, 0, 9)) == doctest::Approx(0.0).scale(1.0).epsilon(1e-9));
+}
+
+TEST_CASE("removeSmallComponents: keeps a cavity's wall, deletes specks of either sign and components turned inside out")
+{
+    Mesh mesh = makeIcosphere(Vec3::Zero(), 6.0, 3);                             // a solid
+    appendMesh(mesh, turnedOver(makeIcosphere(Vec3::Zero(), 3.0, 2)));           // its cavity
+    appendMesh(mesh, turnedOver(makeIcosphere(Vec3(20, 0, 0), 3.0, 2)));         // inside out, alone
+    appendMesh(mesh, makeIcosphere(Vec3(-20, 0, 0), 0.3, 1));                   // a speck
+    appendMesh(mesh, turnedOver(makeIcosphere(Vec3(0, 20, 0), 0.3, 1)));         // an inside-out speck
+    prepareMesh(mesh);
+    REQUIRE(topologyOf(mesh).components == 5);
+    const double delta = 1.0;
+    CHECK(removeSmallComponents(mesh, 6, 0.5 * delta * delta * delta) == 3);
+    mesh.garbage_collection();
+    CHECK_MESH_OK(mesh);
+    const auto t = topologyOf(mesh);
+    CHECK(t.components == 2);
+    CHECK(t.genus == 0);
+    // What is left is the solid and its cavity: 4/3 pi (6^3 - 3^3) ~ 792 (a bit less on the facets).
+    CHECK(signedVolume(mesh) == doctest::Approx(4.0 / 3.0 * M_PI * (216 - 27)).epsilon(0.06));
+}

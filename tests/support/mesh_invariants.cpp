@@ -98,21 +98,17 @@ InvariantReport checkInvariants(const Mesh& mesh, const InvariantOptions& option
         const double area = 0.5 * (b - a).cross(c - a).norm();
         if (!(area > options.minFaceArea)) problem("degenerate face " + std::to_string(f.idx()) + " (area " + std::to_string(area) + ")");
     }
-    // Outward orientation: every component encloses positive volume.
-    if (options.requirePositiveVolume) {
+    // Outward orientation: every solid encloses positive volume, every cavity's inner wall negative
+    // volume inside a solid.
+    if (options.requireOutward) {
         int count = 0;
         const auto label = componentLabels(mesh, &count);
-        std::vector<double> volume(count, 0.0);
-        for (auto f : mesh.faces()) {
-            auto h = mesh.halfedge_handle(f);
-            auto va = mesh.from_vertex_handle(h);
-            Vec3 a = position(mesh, va);
-            Vec3 b = position(mesh, mesh.to_vertex_handle(h));
-            Vec3 c = position(mesh, mesh.to_vertex_handle(mesh.next_halfedge_handle(h)));
-            volume[label[va.idx()]] += a.dot(b.cross(c)) / 6.0;
-        }
-        for (int i = 0; i < count; ++i)
-            if (!(volume[i] > 0)) problem("component " + std::to_string(i) + " encloses non-positive volume " + std::to_string(volume[i]));
+        const auto shapes = componentShapes(mesh, label, count);
+        for (std::size_t i = 0; i < shapes.size(); ++i)
+            if (!shapes[i].outward())
+                problem("component " + std::to_string(i) + " is not oriented outward: volume " +
+                        std::to_string(shapes[i].volume) + ", enclosed by " + std::to_string(shapes[i].enclosure) +
+                        " other components");
     }
     return report;
 }

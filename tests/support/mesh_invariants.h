@@ -1,7 +1,8 @@
 // tests/support/mesh_invariants.h: the invariants every mesh operation must keep.
 //
 // closed (no boundary halfedge), 2-manifold (one fan per vertex, no duplicate edge), oriented
-// (consistent winding; every component encloses positive volume), no degenerate face, finite
+// (consistent winding; every component outward: a solid encloses positive volume, a cavity's inner
+// wall negative volume inside a solid), no degenerate face, finite
 // positions. Tests call CHECK_MESH_OK(mesh) after each operation.
 #pragma once
 
@@ -21,7 +22,7 @@ struct InvariantReport {
 
 struct InvariantOptions {
     double minFaceArea = 1e-12;        ///< faces with a smaller area (world units^2) are degenerate
-    bool requirePositiveVolume = true; ///< every component must enclose positive signed volume
+    bool requireOutward = true; ///< every component oriented outward (ComponentShape::outward())
 };
 
 /// Checks every invariant and returns what is wrong (empty when all hold).

@@ -63,6 +63,28 @@ double signedVolume(const Mesh& mesh);
 /// Per-vertex component labels (0..components-1), indexed by vertex idx(); -1 for deleted vertices.
 std::vector<int> componentLabels(const Mesh& mesh, int* componentCount = nullptr);
 
+/// Generalised winding number of the faces of `mesh` around `x`: the solid angle they subtend,
+/// over 4 pi. 1 inside a closed outward-oriented component, 0 outside, -1 inside an inside-out
+/// one; fractional near a tangle. With `label` (componentLabels()), the faces of component `skip`
+/// are left out. O(faces).
+double windingNumber(const Mesh& mesh, const Vec3& x, const std::vector<int>* label = nullptr, int skip = -1);
+
+/// One connected component, in componentLabels()' numbering.
+struct ComponentShape {
+    std::size_t vertices = 0;
+    double volume = 0;  ///< signed volume: positive for a solid, negative for a cavity's wall
+    int enclosure = 0;  ///< the other components' winding number around it, rounded (0 unless one
+                        ///< of their bounding boxes contains its own)
+    /// Orientation consistent with nesting: a solid (volume > 0) enclosed by nothing, or a cavity's
+    /// inner wall (volume < 0) enclosed by exactly one solid. A component turned inside out (or a
+    /// solid inside a solid) fails.
+    bool outward() const { return volume > 0 ? enclosure == 0 : volume < 0 && enclosure == 1; }
+};
+
+/// Vertex count, signed volume and enclosure of every component (`label` and `count` from
+/// componentLabels()). The winding numbers are computed only where boxes nest.
+std::vector<ComponentShape> componentShapes(const Mesh& mesh, const std::vector<int>& label, int count);
+
 /// Unit area-weighted vertex normal (outward for a correctly oriented mesh).
 Vec3 vertexNormal(const Mesh& mesh, VertexHandle v);
 

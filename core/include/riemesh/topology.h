@@ -92,8 +92,10 @@ TopologyStats resolveTopology(Mesh& mesh, const std::vector<CollisionPair>& coll
                               const std::vector<TunnelCandidate>& tunnels, const TopologyOptions& options = {});
 
 /// Deletes every component with fewer than `minVertices` vertices or enclosing less than
-/// `minVolume` (world units cubed): the specks a deflating model leaves behind after a cut, which
-/// have nothing to hold on to and would shrink into degenerate faces. Returns how many went.
+/// `minVolume` (world units cubed, either sign): the specks a deflating model leaves behind after
+/// a cut, which have nothing to hold on to and would shrink into degenerate faces; and every
+/// component whose orientation contradicts its nesting (ComponentShape::outward(): turned inside
+/// out). A cavity's inner wall (negative volume inside a solid) is kept. Returns how many went.
 /// No garbage_collection().
 int removeSmallComponents(Mesh& mesh, std::size_t minVertices, double minVolume);
 
