@@ -564,7 +564,15 @@ TEST_CASE("stress regressions: cases the soak broke stay valid and embedded")
     const std::pair<std::uint64_t, const char*> cases[] = {
         {12291501983830112541ull, "[torus c=( 7.8985 3.97237 3.07016)"},
         {14864462764286680675ull, "[ball c=(-3.44249  7.06184 -4.38536)"},
-        {8722947093428365254ull, "[ball c=( 1.74289 -6.30578  5.21372)"}};
+        {8722947093428365254ull, "[ball c=( 1.74289 -6.30578  5.21372)"},
+        // From `scripts/soak 150 4242`: a deflating box's sheets met at a sharp convex crease
+        // (normals 104 degrees apart, 0.24 voxel across, less than two steps of vmax) and
+        // crossed; the surface folded further and turned inside out ("the mesh vanished").
+        // findCollisions skipped such crease pairs altogether; it now reports them as contacts,
+        // held apart (never merged).
+        {11703526993037608059ull, "[ball c=(-3.98367  1.43837  5.77631)"},
+        {9527717507708880390ull, "[torus c=( 4.43621  1.16331 -4.82283)"},
+        {5748219494722099803ull, "[torus c=( 5.83604 -6.60176  5.53602)"}};
     for (const auto& entry : cases) { // not a structured binding: clang's C++17 cannot capture one
         const StressCase c = makeCase(entry.first);
         INFO(c.describe());

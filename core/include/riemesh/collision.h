@@ -39,13 +39,14 @@ double collisionLambda(bool euclidean, double zeta, double delta, double vmax);
 /// detour, i.e. <= 2 d_E(u, w) + delta / 2 (a longer path goes around a gap: two sheets joined by
 /// a recent merge, or the two faces of a plate around its rim). Pairs whose vertex normals agree (n_u . n_w > 0.5)
 /// and that lie nearly in each other's tangent planes are same-sheet pairs and skipped without a
-/// search, as are the two sides of a convex crease (each behind the other's tangent plane, normals
-/// less than 120 degrees apart). Pairs of vertices tagged with the same cut id (the two sides of a tunnel cut, see
+/// search. The two sides of a convex crease (each behind the other's tangent plane, normals less
+/// than 120 degrees apart) are never reported: at most contacts (below). Pairs of vertices tagged with the same cut id (the two sides of a tunnel cut, see
 /// kCutIdProperty in topology.h) are never reported, so a fresh cut is not merged back at once.
 /// Deleted vertices are ignored.
 /// `contacts`, when given, receives the pairs within the radius that are close along the mesh
-/// only by a detour (see above) away from a fresh merge: two sheets in contact that the model does
-/// not merge (a fold of the surface) but must not let cross (Evolution holds them apart).
+/// only by a detour (see above) away from a fresh merge, and the crease pairs not close along the
+/// mesh: two sheets in contact that the model does not merge (a fold of the surface, a crease
+/// sharpening into a fin) but must not let cross (Evolution holds them apart).
 std::vector<CollisionPair> findCollisions(const Mesh& mesh, const MetricField& metric,
                                           const CollisionOptions& options = {},
                                           std::vector<CollisionPair>* contacts = nullptr);
