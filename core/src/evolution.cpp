@@ -30,6 +30,9 @@ namespace {
 /// in a core's cache (1-2 MB here), and core_bench measured the gain only above it.
 constexpr std::size_t kRenumberMinVertices = 16384;
 
+/// Free flight at most this fraction of vmax (see step()).
+constexpr double kCreaseRoom = 0.70710678118654752;
+
 void validate(const EvolutionOptions& o)
 {
     if (!(o.delta > 0) || !std::isfinite(o.delta)) throw std::invalid_argument("evolution: delta must be > 0");
@@ -77,13 +80,20 @@ IterationStats Evolution::step()
     // regularity step and now the forces (only vertices created or moved since are sampled here).
     VertexMetrics vertexMetrics(mMesh, mMetric);
     vertexMetrics.update();
-    computeForces(mMesh, mImage, o.forces, o.delta, mForces, &mMetric);
+    // Free flight runs at the terminal speed externalLimit delta / damping. A convex crease of the
+    // front (a deflating box's edges) travels along its bisector, sqrt 2 times as far as the
+    // faces beside it for a right angle: were the faces already at vmax, the clamp would hold the
+    // crease back and it would sharpen into a fin whose sides cross. So the push is capped where
+    // the faces would fly faster than vmax / sqrt 2 (never with the defaults: 0.25 vs 0.35 delta).
+    ForceOptions forces = o.forces;
+    if (o.damping > 0) forces.externalLimit = std::min(forces.externalLimit, kCreaseRoom * o.damping * vmax / o.delta);
+    computeForces(mMesh, mImage, forces, o.delta, mForces, &mMetric);
     phase(it.phases.forces);
     IntegrationOptions io;
     io.mass = o.mass;
     io.damping = o.damping;
     io.vmax = vmax;
-    io.movingSpeed = 0.5 * o.forces.externalLimit * o.delta / std::max(o.damping, 1e-9); // half the terminal speed F/gamma
+    io.movingSpeed = 0.5 * forces.externalLimit * o.delta / std::max(o.damping, 1e-9); // half the terminal speed F/gamma
     const IntegrationStats is = integrate(mMesh, mForces, io);
     vertexMetrics.update(); // every vertex that moved
     phase(it.phases.integration);
