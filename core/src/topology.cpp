@@ -288,6 +288,12 @@ bool isBandEmbedded(const Mesh& mesh, const std::vector<FaceHandle>& nearby, con
     for (const Triangle& t : band) {
         refs.push_back(corners(t));
         if (refs.back().axis < 0) return false; // a flat band face
+        // A nearly flat one too (height under 1e-8 of its longest edge): the loops of a pair that
+        // met at vmax ~ delta held collinear corners up to round-off, and the band face's area was
+        // 2e-16 (stress case 145331693200290732).
+        const Vec3 p = position(mesh, t[0]), q = position(mesh, t[1]), r = position(mesh, t[2]);
+        const double longest = std::max({(q - p).squaredNorm(), (r - q).squaredNorm(), (p - r).squaredNorm()});
+        if (!((q - p).cross(r - p).squaredNorm() > 1e-16 * longest * longest)) return false;
         for (auto v : t) box.extend(position(mesh, v));
     }
     for (std::size_t i = 0; i < band.size(); ++i)
