@@ -118,8 +118,10 @@ double now()
 void scaling(bool quick)
 {
     std::printf("\n# cost per iteration against vertex count (ball image, Euclidean, converged sphere)\n");
-    std::printf("%12s %10s %12s %14s %8s %8s %8s %8s %8s\n", "target", "vertices", "ms/iter", "us/iter/vertex",
-                "forces", "integr.", "regul.", "collis.", "topol.");
+    // "growth": the exponent k of ms ~ vertices^k from the row above (1 = linear).
+    std::printf("%12s %10s %12s %14s %7s %8s %8s %8s %8s %8s\n", "target", "vertices", "ms/iter", "us/iter/vertex",
+                "growth", "forces", "integr.", "regul.", "collis.", "topol.");
+    double lastMs = 0, lastVertices = 0;
     // The last row is the peer of the one before it: the same run without renumbering the mesh
     // for memory locality (EvolutionOptions::renumber).
     const int targets[] = {1000, 5000, 20000, 80000, -80000};
@@ -161,10 +163,14 @@ void scaling(bool quick)
             sum.collisions += p.collisions / n, sum.topology += p.topology / n;
         }
         const double ms = (now() - t0) * 1000.0 / n;
-        std::printf("%12s %10zu %12.3f %14.4f %8.2f %8.2f %8.2f %8.2f %8.2f\n",
+        const double vertices = double(mesh.n_vertices());
+        const std::string growth = o.renumber && lastMs > 0
+            ? std::to_string(std::log(ms / lastMs) / std::log(vertices / lastVertices)).substr(0, 4) : "";
+        std::printf("%12s %10zu %12.3f %14.4f %7s %8.2f %8.2f %8.2f %8.2f %8.2f\n",
                     (std::to_string(target) + (o.renumber ? "" : " as-is")).c_str(), mesh.n_vertices(), ms,
-                    1000.0 * ms / mesh.n_vertices(), sum.forces, sum.integration, sum.regularity, sum.collisions,
-                    sum.topology);
+                    1000.0 * ms / vertices, growth.c_str(), sum.forces, sum.integration, sum.regularity,
+                    sum.collisions, sum.topology);
+        if (o.renumber) lastMs = ms, lastVertices = vertices;
     }
 }
 
