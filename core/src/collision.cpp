@@ -30,7 +30,7 @@ constexpr double kSquaredTangentSlope = 0.25; // (sin 30 degrees)^2
 /// They cannot be colliding sheets unless the normals are nearly opposite (a thin plate, which
 /// the paper does report under a coarse Euclidean metric): never merged. But a crease that
 /// sharpens into a fin brings its sides within a step of each other, and they cross: such a pair,
-/// within 2 vmax and not close along the mesh, is a contact (held apart by Evolution). Stress soak (seed 4242,
+/// unless close along the mesh, is a contact (held apart by Evolution). Stress soak (seed 4242,
 /// 150 cases), broken + tangled runs: 9 + 2 when crease pairs were skipped, 1 + 2 as contacts;
 /// seed 777, 100 cases: 2 + 3, then 1 + 1.
 constexpr double kCreaseAgreement = -0.5; // cos 120 degrees
@@ -172,9 +172,6 @@ std::vector<CollisionPair> findCollisions(const Mesh& mesh, const MetricField& m
     S.near.resize(count);
     std::uint32_t* const near = S.near.data();
     const double r2 = radius * radius;
-    // Crease pairs matter only once they could cross within a step (each moves up to vmax); the
-    // others would cost a path search each (a deflating box has thousands).
-    const double creaseReach2 = 4.0 * options.vmax * options.vmax;
     const bool euclidean = metric.isEuclidean();
     auto consider = [&](std::uint32_t sa, std::uint32_t sb, double d2, bool crease) {
         const int a = ids[sa], b = ids[sb];
@@ -235,7 +232,7 @@ std::vector<CollisionPair> findCollisions(const Mesh& mesh, const MetricField& m
                 // Convex crease: each vertex behind the other's tangent plane and the normals
                 // less than 120 degrees apart (a thin plate has opposite normals and stays in).
                 const bool crease = (agree > kCreaseAgreement) & (hu < 0) & (hw > 0);
-                if (!flat && (!crease || d2 <= creaseReach2)) consider(s, t, d2, crease);
+                if (!flat) consider(s, t, d2, crease);
             }
         }
     });
@@ -255,11 +252,34 @@ std::vector<CollisionPair> findCollisions(const Mesh& mesh, const MetricField& m
         const double* q = xyz + 3 * b;
         return std::sqrt((p[0] - q[0]) * (p[0] - q[0]) + (p[1] - q[1]) * (p[1] - q[1]) + (p[2] - q[2]) * (p[2] - q[2]));
     };
+    // A crease pair is usually joined through the crease by a two-edge path, checked first;
+    // otherwise it, like any pair, asks the source's bounded search (run once per source, and for a
+    // source with crease pairs alone only as far as their detour limit: a deflating box's creases
+    // make many such sources).
+    auto closeByTwoEdges = [&](int u, int w, double limit) {
+        const Mesh::Point& pu = point[u];
+        for (auto h : mesh.voh_range(VertexHandle(u))) {
+            const VertexHandle x = mesh.to_vertex_handle(h);
+            if (x.idx() == w) return true;
+            const double ux = (mesh.point(x) - pu).norm();
+            if (ux >= limit) continue;
+            for (auto g : mesh.voh_range(x))
+                if (mesh.to_vertex_handle(g).idx() == w && ux + (point[w] - mesh.point(x)).norm() <= limit) return true;
+        }
+        return false;
+    };
     int source = -1;
-    for (const Candidate& c : candidates) {
+    for (std::size_t k = 0; k < candidates.size(); ++k) {
+        const Candidate& c = candidates[k];
+        if (c.crease && closeByTwoEdges(c.u, c.w, kDetour * euclideanDistance(c.u, c.w) + detourSlack)) continue;
         if (c.u != source) {
             source = c.u;
-            search.run(mesh, VertexHandle(source), pathBound);
+            double bound = 0;
+            for (std::size_t j = k; j < candidates.size() && candidates[j].u == source && bound < pathBound; ++j)
+                bound = std::max(bound, candidates[j].crease
+                                            ? kDetour * euclideanDistance(candidates[j].u, candidates[j].w) + detourSlack
+                                            : pathBound);
+            search.run(mesh, VertexHandle(source), std::min(bound, pathBound));
         }
         // Close along the mesh: a short edge path that is no detour around a gap (see kDetour).
         if (search.reached(VertexHandle(c.w))) {
