@@ -6,6 +6,7 @@
 #include "riemesh/evolution.h"
 #include "riemesh/primitives.h"
 #include "riemesh/self_intersection.h"
+#include "topology_fixtures.h"
 
 #include <doctest/doctest.h>
 
@@ -212,15 +213,7 @@ TEST_CASE("evolution: a closed cavity's inner wall survives the cuts elsewhere i
         },
         Box3(Vec3(-18, -9, -9), Vec3(16, 9, 9)));
     Mesh mesh = makeInitialBox(image, 2.0);
-    Mesh bubble = makeIcosphere(hollow, 1.5, 2);
-    Mesh inward;
-    for (auto v : bubble.vertices()) inward.add_vertex(bubble.point(v));
-    for (auto f : bubble.faces()) {
-        std::vector<VertexHandle> corners;
-        for (auto v : bubble.fv_range(f)) corners.insert(corners.begin(), v);
-        inward.add_face(corners);
-    }
-    appendMesh(mesh, inward);
+    appendMesh(mesh, fixtures::turnedOver(makeIcosphere(hollow, 1.5, 2)));
     REQUIRE_MESH_OK(mesh);
     EuclideanMetric metric;
     const auto stats = runChecked(mesh, image, metric, baseOptions(1.0));

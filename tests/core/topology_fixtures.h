@@ -1,5 +1,6 @@
 // tests/core/topology_fixtures.h: procedural fixtures for the collision and topology suites
-// (regular spheres and tori, a dumbbell with a triangular-prism tube, edge statistics).
+// (regular spheres and tori, a dumbbell with a triangular-prism tube, turned-over copies, edge
+// statistics).
 #pragma once
 
 #include "riemesh/mesh.h"
@@ -18,6 +19,20 @@ struct EdgeStats {
     double max = 0;
     double mean = 0;
 };
+
+/// `mesh` with every face turned over: the same surface oriented inward (a cavity's wall, or a
+/// component turned inside out).
+inline Mesh turnedOver(const Mesh& mesh)
+{
+    Mesh out;
+    for (auto v : mesh.vertices()) out.add_vertex(mesh.point(v));
+    for (auto f : mesh.faces()) {
+        std::vector<VertexHandle> corners;
+        for (auto v : mesh.fv_range(f)) corners.insert(corners.begin(), v);
+        out.add_face(corners);
+    }
+    return out;
+}
 
 inline EdgeStats edgeStats(const Mesh& mesh)
 {

@@ -384,25 +384,6 @@ TEST_CASE("merge: the band never crosses itself or the surface, even between til
     CHECK(merged > 50);
 }
 
-namespace {
-
-/// `mesh` with every face turned over: the same sphere, oriented inward (a cavity's wall, or
-/// a component turned inside out).
-Mesh turnedOver(const Mesh& mesh)
-{
-    Mesh out;
-    for (auto v : mesh.vertices()) out.add_vertex(mesh.point(v));
-    for (auto f : mesh.faces()) {
-        std::vector<VertexHandle> corners;
-        for (auto v : mesh.fv_range(f)) corners.push_back(v);
-        std::reverse(corners.begin(), corners.end());
-        out.add_face(corners);
-    }
-    return out;
-}
-
-} // namespace
-
 TEST_CASE("componentShapes: a cavity's wall is outward, a component turned inside out or a solid inside a solid is not")
 {
     Mesh shell = makeIcosphere(Vec3::Zero(), 5.0, 3);
