@@ -116,31 +116,7 @@ void reorderForLocality(Scene& s)
     for (std::size_t i = 0; i < nv; ++i) std::copy_n(&s.vertices[9 * i], 9, &verts[9 * remap[i]]);
     s.vertices.swap(verts);
     s.triangles.swap(tris);
-    // The edges (wireframe) in the order of their first vertex, for the same locality; their faces
-    // follow the triangles' new order.
-    std::vector<std::uint32_t> faceAt(nt);
-    for (std::size_t i = 0; i < nt; ++i) faceAt[keyed[i] & 0xffffffffu] = std::uint32_t(i);
-    const std::size_t ne = s.edges.size() / 2;
-    std::vector<std::uint32_t> order(ne);
-    std::vector<std::uint32_t> first(ne);
-    for (std::size_t i = 0; i < ne; ++i) {
-        order[i] = std::uint32_t(i);
-        first[i] = std::min(remap[s.edges[2 * i]], remap[s.edges[2 * i + 1]]);
-    }
-    std::sort(order.begin(), order.end(), [&](std::uint32_t a, std::uint32_t b) { return first[a] < first[b]; });
-    std::vector<std::uint32_t> edges(2 * ne), edgeFaces(2 * ne);
-    const bool withFaces = s.edgeFaces.size() == 2 * ne;
-    for (std::size_t i = 0; i < ne; ++i) {
-        const std::uint32_t e = order[i];
-        edges[2 * i] = remap[s.edges[2 * e]];
-        edges[2 * i + 1] = remap[s.edges[2 * e + 1]];
-        for (int k = 0; withFaces && k < 2; ++k) {
-            const std::uint32_t f = s.edgeFaces[2 * e + k];
-            edgeFaces[2 * i + k] = f < nt ? faceAt[f] : ~0u;
-        }
-    }
-    s.edges.swap(edges);
-    if (withFaces) s.edgeFaces.swap(edgeFaces);
+    for (auto& e : s.edges) e = remap[e];
 }
 
 const char* kColourNames[] = {"shaded", "metric edge length", "local resolution"};
@@ -420,9 +396,7 @@ void App::rebuildMeshGeometry()
     auto& value = mScratchValues;
     auto& count = mScratchCounts;
     auto& index = mScratchIndex;
-    auto& faceIndex = mScratchFaceIndex;
     pos.resize(nv);
-    faceIndex.assign(mMesh.n_faces(), ~0u);
     nrm.assign(nv, Vec3::Zero());
     index.assign(nv, 0);
     std::uint32_t n = 0;
@@ -445,7 +419,6 @@ void App::rebuildMeshGeometry()
         const Vec3 p[3] = {pos[iv[0]], pos[iv[1]], pos[iv[2]]};
         // vertexNormal(): sum of (b - a) x (c - a) with a = from(h), b = to(h), c = to(next h).
         const Vec3 fn = (p[0] - p[2]).cross(p[1] - p[2]);
-        faceIndex[f.idx()] = std::uint32_t(t / 3);
         for (int k = 0; k < 3; ++k) {
             nrm[iv[k]] += fn;
             s.triangles[t++] = index[iv[k]];
@@ -467,7 +440,6 @@ void App::rebuildMeshGeometry()
     // Mean length of the edges around each vertex, measured with the metric at the vertex (metric edge
     // length) or Euclidean (local resolution), over delta.
     s.edges.resize(std::size_t(2) * mMesh.n_edges());
-    s.edgeFaces.resize(s.edges.size());
     std::size_t k = 0;
     const bool coloured = mColour != ColourMode::Shaded;
     if (coloured) {
@@ -481,9 +453,6 @@ void App::rebuildMeshGeometry()
     for (auto e : mMesh.edges()) {
         const auto h = mMesh.halfedge_handle(e, 0);
         const int a = mMesh.from_vertex_handle(h).idx(), b = mMesh.to_vertex_handle(h).idx();
-        const auto f0 = mMesh.face_handle(h), f1 = mMesh.face_handle(mMesh.opposite_halfedge_handle(h));
-        s.edgeFaces[k] = f0.is_valid() ? faceIndex[f0.idx()] : ~0u;
-        s.edgeFaces[k + 1] = f1.is_valid() ? faceIndex[f1.idx()] : ~0u;
         s.edges[k++] = index[a];
         s.edges[k++] = index[b];
         if (!coloured) continue;
@@ -500,7 +469,6 @@ void App::rebuildMeshGeometry()
         ++count[b];
     }
     s.edges.resize(k);
-    s.edgeFaces.resize(k);
     const double delta = evolutionOptions().delta;
     float lo = 1e30f, hi = -1e30f;
     if (coloured)

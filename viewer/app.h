@@ -64,9 +64,6 @@ struct Scene {
     std::vector<float> vertices;
     /// Triangles (3 indices each) and edges (2 each) into `vertices`.
     std::vector<std::uint32_t> triangles, edges;
-    /// Per edge, its two triangles (indices into triangles / 3; ~0u: none): the renderer draws only
-    /// the edges of the triangles that face the camera.
-    std::vector<std::uint32_t> edgeFaces;
     /// The mesh's cross-section with the slice plane: per end x y z.
     std::vector<float> section;
     SliceImage slice;
@@ -153,7 +150,7 @@ private:
     std::vector<Mat3> mScratchMetric;
     std::vector<double> mScratchValues;
     std::vector<int> mScratchCounts;
-    std::vector<std::uint32_t> mScratchIndex, mScratchFaceIndex;
+    std::vector<std::uint32_t> mScratchIndex;
     ColourMode mColour = ColourMode::MetricEdgeLength;
     int mSliceAxis = 2;
     float mSlicePosition = 0.5f;       ///< fraction of the bounds along the axis
