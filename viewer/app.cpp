@@ -119,6 +119,14 @@ void reorderForLocality(Scene& s)
     for (auto& e : s.edges) e = remap[e];
 }
 
+/// Greyed text wrapped at the panel's width.
+void textDisabledWrapped(const char* text)
+{
+    ImGui::PushStyleColor(ImGuiCol_Text, ImGui::GetStyleColorVec4(ImGuiCol_TextDisabled));
+    ImGui::TextWrapped("%s", text);
+    ImGui::PopStyleColor();
+}
+
 const char* kColourNames[] = {"shaded", "metric edge length", "local resolution"};
 const char* kAxisNames[] = {"x", "y", "z"};
 
@@ -653,11 +661,16 @@ void App::drawPanels()
         mShownIntervalMs = mFrameInterval * 1e3;
         mShownFrameMs = mLastFrameMs;
     }
-    ImGui::Text("frame %.0f ms (model + UI %.0f ms)", mShownIntervalMs, mShownFrameMs);
+    // The interval between drawn frames while frames are drawn; an idle page draws nothing (the
+    // interval between its rare redraws would say nothing about the time a frame takes).
+    if (nowSeconds() - mDrawingAt < 0.5)
+        ImGui::Text("frame %.0f ms (model + UI %.0f ms)", mShownIntervalMs, mShownFrameMs);
+    else
+        ImGui::Text("frame: idle (model + UI %.0f ms)", mShownFrameMs);
     if (mColour == ColourMode::MetricEdgeLength)
-        ImGui::TextDisabled("colour: metric edge length / delta, 1 (purple) .. zeta (yellow)");
+        textDisabledWrapped("colour: metric edge length / delta, 1 (purple) .. zeta (yellow)");
     else if (mColour == ColourMode::LocalResolution)
-        ImGui::TextDisabled("colour: edge length in voxels, fine (purple) .. coarse (yellow)");
+        textDisabledWrapped("colour: edge length in voxels, fine (purple) .. coarse (yellow)");
 
     // --- plots
     if (ImGui::CollapsingHeader("Plots", ImGuiTreeNodeFlags_DefaultOpen)) {
@@ -670,12 +683,13 @@ void App::drawPanels()
         ImGui::TextDisabled("mean kinetic energy per iteration");
         ImGui::PlotHistogram("##lengths", p.histogram.data(), int(p.histogram.size()), 0, "edge length / delta",
                              0.f, p.histogramMax * 1.1f, ImVec2(plotWidth, 50));
-        ImGui::TextDisabled("0 .. 1.5 zeta; the band [1, zeta] is the regular one");
+        textDisabledWrapped("0 .. 1.5 zeta; the band [1, zeta] is the regular one");
     }
 
     // --- parameters
     bool changed = false, metricChanged = false;
-    if (ImGui::CollapsingHeader("Model", ImGuiTreeNodeFlags_DefaultOpen)) {
+    // Closed at first: a shorter panel costs less to put over every frame in software WebGL.
+    if (ImGui::CollapsingHeader("Model")) {
         const double isoLo = mImageMin, isoHi = mImageMax;
         changed |= ImGui::SliderScalar("iso", ImGuiDataType_Double, &mParams.iso, &isoLo, &isoHi, "%.3f");
         const double dLo = 0.5, dHi = 8, zLo = 2.0, zHi = 5.0, mLo = 0, mHi = 2, wLo = 0, wHi = 2, cHi = 0.5;
@@ -805,8 +819,6 @@ bool App::setParameter(const std::string& name, double value)
 void App::frame(double budgetMs, int width, int height)
 {
     const double start = nowSeconds();
-    if (mLastFrameStart > 0) mFrameInterval = 0.9 * mFrameInterval + 0.1 * (start - mLastFrameStart);
-    mLastFrameStart = start;
     advance(budgetMs);
     handleCameraInput(width, height);
     drawPanels();
@@ -822,6 +834,18 @@ void App::frame(double budgetMs, int width, int height)
         }
     }
     mLastFrameMs = (nowSeconds() - start) * 1e3;
+}
+
+void App::frameShown(bool drawn)
+{
+    const double now = nowSeconds();
+    if (drawn && mLastDrawn) {
+        const double dt = now - mLastDrawnAt;
+        mFrameInterval = mFrameInterval > 0 ? 0.9 * mFrameInterval + 0.1 * dt : dt;
+        mDrawingAt = now;
+    }
+    if (drawn) mLastDrawnAt = now;
+    mLastDrawn = drawn;
 }
 
 } // namespace riemesh::viewer

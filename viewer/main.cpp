@@ -229,6 +229,7 @@ void frame()
         drawUi(v, ui, width, height);
         glfwSwapBuffers(v.window);
     }
+    v.app.frameShown(draw);
 
     if (auto path = v.app.takeDownload()) offerDownload(*path);
 }
