@@ -116,31 +116,15 @@ void reorderForLocality(Scene& s)
     for (std::size_t i = 0; i < nv; ++i) std::copy_n(&s.vertices[9 * i], 9, &verts[9 * remap[i]]);
     s.vertices.swap(verts);
     s.triangles.swap(tris);
-    // The edges (wireframe) in the order of their first vertex, for the same locality; their faces
-    // follow the triangles' new order.
-    std::vector<std::uint32_t> faceAt(nt);
-    for (std::size_t i = 0; i < nt; ++i) faceAt[keyed[i] & 0xffffffffu] = std::uint32_t(i);
-    const std::size_t ne = s.edges.size() / 2;
-    std::vector<std::uint32_t> order(ne);
-    std::vector<std::uint32_t> first(ne);
-    for (std::size_t i = 0; i < ne; ++i) {
-        order[i] = std::uint32_t(i);
-        first[i] = std::min(remap[s.edges[2 * i]], remap[s.edges[2 * i + 1]]);
-    }
-    std::sort(order.begin(), order.end(), [&](std::uint32_t a, std::uint32_t b) { return first[a] < first[b]; });
-    std::vector<std::uint32_t> edges(2 * ne), edgeFaces(2 * ne);
-    const bool withFaces = s.edgeFaces.size() == 2 * ne;
-    for (std::size_t i = 0; i < ne; ++i) {
-        const std::uint32_t e = order[i];
-        edges[2 * i] = remap[s.edges[2 * e]];
-        edges[2 * i + 1] = remap[s.edges[2 * e + 1]];
-        for (int k = 0; withFaces && k < 2; ++k) {
-            const std::uint32_t f = s.edgeFaces[2 * e + k];
-            edgeFaces[2 * i + k] = f < nt ? faceAt[f] : ~0u;
-        }
-    }
-    s.edges.swap(edges);
-    if (withFaces) s.edgeFaces.swap(edgeFaces);
+    for (auto& e : s.edges) e = remap[e];
+}
+
+/// Greyed text wrapped at the panel's width.
+void textDisabledWrapped(const char* text)
+{
+    ImGui::PushStyleColor(ImGuiCol_Text, ImGui::GetStyleColorVec4(ImGuiCol_TextDisabled));
+    ImGui::TextWrapped("%s", text);
+    ImGui::PopStyleColor();
 }
 
 const char* kColourNames[] = {"shaded", "metric edge length", "local resolution"};
@@ -420,9 +404,7 @@ void App::rebuildMeshGeometry()
     auto& value = mScratchValues;
     auto& count = mScratchCounts;
     auto& index = mScratchIndex;
-    auto& faceIndex = mScratchFaceIndex;
     pos.resize(nv);
-    faceIndex.assign(mMesh.n_faces(), ~0u);
     nrm.assign(nv, Vec3::Zero());
     index.assign(nv, 0);
     std::uint32_t n = 0;
@@ -445,7 +427,6 @@ void App::rebuildMeshGeometry()
         const Vec3 p[3] = {pos[iv[0]], pos[iv[1]], pos[iv[2]]};
         // vertexNormal(): sum of (b - a) x (c - a) with a = from(h), b = to(h), c = to(next h).
         const Vec3 fn = (p[0] - p[2]).cross(p[1] - p[2]);
-        faceIndex[f.idx()] = std::uint32_t(t / 3);
         for (int k = 0; k < 3; ++k) {
             nrm[iv[k]] += fn;
             s.triangles[t++] = index[iv[k]];
@@ -467,7 +448,6 @@ void App::rebuildMeshGeometry()
     // Mean length of the edges around each vertex, measured with the metric at the vertex (metric edge
     // length) or Euclidean (local resolution), over delta.
     s.edges.resize(std::size_t(2) * mMesh.n_edges());
-    s.edgeFaces.resize(s.edges.size());
     std::size_t k = 0;
     const bool coloured = mColour != ColourMode::Shaded;
     if (coloured) {
@@ -481,9 +461,6 @@ void App::rebuildMeshGeometry()
     for (auto e : mMesh.edges()) {
         const auto h = mMesh.halfedge_handle(e, 0);
         const int a = mMesh.from_vertex_handle(h).idx(), b = mMesh.to_vertex_handle(h).idx();
-        const auto f0 = mMesh.face_handle(h), f1 = mMesh.face_handle(mMesh.opposite_halfedge_handle(h));
-        s.edgeFaces[k] = f0.is_valid() ? faceIndex[f0.idx()] : ~0u;
-        s.edgeFaces[k + 1] = f1.is_valid() ? faceIndex[f1.idx()] : ~0u;
         s.edges[k++] = index[a];
         s.edges[k++] = index[b];
         if (!coloured) continue;
@@ -500,7 +477,6 @@ void App::rebuildMeshGeometry()
         ++count[b];
     }
     s.edges.resize(k);
-    s.edgeFaces.resize(k);
     const double delta = evolutionOptions().delta;
     float lo = 1e30f, hi = -1e30f;
     if (coloured)
@@ -685,11 +661,16 @@ void App::drawPanels()
         mShownIntervalMs = mFrameInterval * 1e3;
         mShownFrameMs = mLastFrameMs;
     }
-    ImGui::Text("frame %.0f ms (model + UI %.0f ms)", mShownIntervalMs, mShownFrameMs);
+    // The interval between drawn frames while frames are drawn; an idle page draws nothing (the
+    // interval between its rare redraws would say nothing about the time a frame takes).
+    if (nowSeconds() - mDrawingAt < 0.5)
+        ImGui::Text("frame %.0f ms (model + UI %.0f ms)", mShownIntervalMs, mShownFrameMs);
+    else
+        ImGui::Text("frame: idle (model + UI %.0f ms)", mShownFrameMs);
     if (mColour == ColourMode::MetricEdgeLength)
-        ImGui::TextDisabled("colour: metric edge length / delta, 1 (purple) .. zeta (yellow)");
+        textDisabledWrapped("colour: metric edge length / delta, 1 (purple) .. zeta (yellow)");
     else if (mColour == ColourMode::LocalResolution)
-        ImGui::TextDisabled("colour: edge length in voxels, fine (purple) .. coarse (yellow)");
+        textDisabledWrapped("colour: edge length in voxels, fine (purple) .. coarse (yellow)");
 
     // --- plots
     if (ImGui::CollapsingHeader("Plots", ImGuiTreeNodeFlags_DefaultOpen)) {
@@ -702,12 +683,13 @@ void App::drawPanels()
         ImGui::TextDisabled("mean kinetic energy per iteration");
         ImGui::PlotHistogram("##lengths", p.histogram.data(), int(p.histogram.size()), 0, "edge length / delta",
                              0.f, p.histogramMax * 1.1f, ImVec2(plotWidth, 50));
-        ImGui::TextDisabled("0 .. 1.5 zeta; the band [1, zeta] is the regular one");
+        textDisabledWrapped("0 .. 1.5 zeta; the band [1, zeta] is the regular one");
     }
 
     // --- parameters
     bool changed = false, metricChanged = false;
-    if (ImGui::CollapsingHeader("Model", ImGuiTreeNodeFlags_DefaultOpen)) {
+    // Closed at first: a shorter panel costs less to put over every frame in software WebGL.
+    if (ImGui::CollapsingHeader("Model")) {
         const double isoLo = mImageMin, isoHi = mImageMax;
         changed |= ImGui::SliderScalar("iso", ImGuiDataType_Double, &mParams.iso, &isoLo, &isoHi, "%.3f");
         const double dLo = 0.5, dHi = 8, zLo = 2.0, zHi = 5.0, mLo = 0, mHi = 2, wLo = 0, wHi = 2, cHi = 0.5;
@@ -837,8 +819,6 @@ bool App::setParameter(const std::string& name, double value)
 void App::frame(double budgetMs, int width, int height)
 {
     const double start = nowSeconds();
-    if (mLastFrameStart > 0) mFrameInterval = 0.9 * mFrameInterval + 0.1 * (start - mLastFrameStart);
-    mLastFrameStart = start;
     advance(budgetMs);
     handleCameraInput(width, height);
     drawPanels();
@@ -854,6 +834,18 @@ void App::frame(double budgetMs, int width, int height)
         }
     }
     mLastFrameMs = (nowSeconds() - start) * 1e3;
+}
+
+void App::frameShown(bool drawn)
+{
+    const double now = nowSeconds();
+    if (drawn && mLastDrawn) {
+        const double dt = now - mLastDrawnAt;
+        mFrameInterval = mFrameInterval > 0 ? 0.9 * mFrameInterval + 0.1 * dt : dt;
+        mDrawingAt = now;
+    }
+    if (drawn) mLastDrawnAt = now;
+    mLastDrawn = drawn;
 }
 
 } // namespace riemesh::viewer

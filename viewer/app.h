@@ -64,9 +64,6 @@ struct Scene {
     std::vector<float> vertices;
     /// Triangles (3 indices each) and edges (2 each) into `vertices`.
     std::vector<std::uint32_t> triangles, edges;
-    /// Per edge, its two triangles (indices into triangles / 3; ~0u: none): the renderer draws only
-    /// the edges of the triangles that face the camera.
-    std::vector<std::uint32_t> edgeFaces;
     /// The mesh's cross-section with the slice plane: per end x y z.
     std::vector<float> section;
     SliceImage slice;
@@ -97,6 +94,11 @@ public:
     /// framebuffer size in pixels.
     void frame(double budgetMs, int width, int height);
 
+    /// The main loop tells whether the frame it just finished was drawn (the page does not draw a
+    /// frame that would show the same image as the last one): the panel's frame time is the interval
+    /// between consecutive drawn frames, and "idle" when nothing has been drawn for a while.
+    void frameShown(bool drawn);
+
     /// Runs without UI until the evolution stops (native `--headless`); returns the final stats line.
     std::string runToConvergence();
 
@@ -113,7 +115,7 @@ public:
 
     /// The state as JSON (the page's JS API and tests): iteration, vertices, components, genus,
     /// playing, state ("evolving", "paused", "converged", ...), computeSeconds, frameMs (frame interval,
-    /// smoothed), cpuMs (the last frame's model + UI time on the main thread), volume.
+    /// smoothed, between consecutive drawn frames), cpuMs (the last frame's model + UI time on the main thread), volume.
     std::string stateJson() const;
     /// Sets a model parameter by name (iso, delta, zeta, mu_scale, riemannian, inflation, umbrella,
     /// curvature, gradient) or a display setting (colour: 0 shaded, 1 metric edge length, 2 local
@@ -153,7 +155,7 @@ private:
     std::vector<Mat3> mScratchMetric;
     std::vector<double> mScratchValues;
     std::vector<int> mScratchCounts;
-    std::vector<std::uint32_t> mScratchIndex, mScratchFaceIndex;
+    std::vector<std::uint32_t> mScratchIndex;
     ColourMode mColour = ColourMode::MetricEdgeLength;
     int mSliceAxis = 2;
     float mSlicePosition = 0.5f;       ///< fraction of the bounds along the axis
@@ -165,7 +167,9 @@ private:
     std::string mMessage;
     std::optional<std::string> mDownload;
     double mLastFrameMs = 0;
-    double mLastFrameStart = 0, mFrameInterval = 0; ///< seconds, smoothed
+    double mLastDrawnAt = -1, mFrameInterval = 0; ///< seconds; between consecutive drawn frames, smoothed
+    double mDrawingAt = -1;  ///< when the last of two consecutive frames was drawn (seconds)
+    bool mLastDrawn = false; ///< the last frame was drawn
     double mShownAt = -1, mShownIntervalMs = 0, mShownFrameMs = 0; ///< the figures the panel shows
     /// The model's figures the panel shows, refreshed at most every 0.2 s while the model evolves
     /// (see drawPanels()) and at every frame otherwise.

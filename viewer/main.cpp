@@ -229,6 +229,7 @@ void frame()
         drawUi(v, ui, width, height);
         glfwSwapBuffers(v.window);
     }
+    v.app.frameShown(draw);
 
     if (auto path = v.app.takeDownload()) offerDownload(*path);
 }
@@ -338,7 +339,11 @@ int run(int argc, char** argv)
     glfwWindowHint(GLFW_CONTEXT_VERSION_MINOR, 3);
     glfwWindowHint(GLFW_OPENGL_PROFILE, GLFW_OPENGL_CORE_PROFILE);
 #endif
-#ifndef __EMSCRIPTEN__
+#ifdef __EMSCRIPTEN__
+    // An opaque canvas (alpha: false: the browser need not blend it over the page) without stencil.
+    glfwWindowHint(GLFW_ALPHA_BITS, 0);
+    glfwWindowHint(GLFW_STENCIL_BITS, 0);
+#else
     glfwWindowHint(GLFW_SAMPLES, 4); // (not on the web: multisampling is slow in software WebGL)
 #endif
     v.window = glfwCreateWindow(1280, 800, "riemesh", nullptr, nullptr);

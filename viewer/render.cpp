@@ -10,6 +10,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstddef>
 #include <stdexcept>
 #include <string>
 
@@ -30,7 +31,39 @@ void main() {
     vColour = aColour;
     vPosition = aPosition;
     gl_Position = uViewProjection * vec4(aPosition, 1.0);
+    setCorner();
 }
+)";
+
+// The wireframe, drawn by the faces themselves (WIREFRAME defined): the triangles are drawn unrolled
+// (vertex 3t + k is corner k of triangle t), each fragment gets its barycentric coordinates, and
+// those within a pixel of an edge (b / |grad b|: the distance in pixels) take some of the line's
+// colour (a one-pixel line, antialiased: half a pixel on each side). Software WebGL sets up and
+// rasterises each line of a wireframe as much as a triangle; this costs a few operations per pixel.
+const char* kWireframeVertex = R"(
+#ifdef WIREFRAME
+out vec3 vCorner;
+void setCorner() {
+    int k = gl_VertexID % 3;
+    vCorner = vec3(k == 0 ? 1.0 : 0.0, k == 1 ? 1.0 : 0.0, k == 2 ? 1.0 : 0.0);
+}
+#else
+void setCorner() {}
+#endif
+)";
+
+const char* kWireframeFragment = R"(
+#ifdef WIREFRAME
+in highp vec3 vCorner;
+vec3 withWire(vec3 shade) {
+    highp vec3 dx = dFdx(vCorner), dy = dFdy(vCorner);
+    highp vec3 pixels = vCorner * inversesqrt(max(dx * dx + dy * dy, vec3(1e-12)));
+    float inside = clamp(min(min(pixels.x, pixels.y), pixels.z), 0.0, 1.0);
+    return mix(vec3(0.08, 0.08, 0.1), shade, inside);
+}
+#else
+vec3 withWire(vec3 shade) { return shade; }
+#endif
 )";
 
 // The lighting, shared by the per-pixel and the per-vertex mesh programs: a two-sided headlight plus
@@ -60,7 +93,7 @@ in vec3 vColour;
 in vec3 vPosition;
 uniform vec3 uEye;
 out vec4 fragColour;
-void main() { fragColour = vec4(lit(vNormal, vColour, uEye - vPosition), 1.0); }
+void main() { fragColour = vec4(withWire(lit(vNormal, vColour, uEye - vPosition)), 1.0); }
 )";
 
 // Per-vertex lighting (Gouraud): the same lighting at the vertices, interpolated. For a mesh whose
@@ -76,6 +109,7 @@ out vec3 vShade;
 void main() {
     vShade = lit(aNormal, aColour, uEye - aPosition);
     gl_Position = uViewProjection * vec4(aPosition, 1.0);
+    setCorner();
 }
 )";
 
@@ -83,16 +117,13 @@ const char* kVertexLitFragment = R"(
 precision mediump float;
 in vec3 vShade;
 out vec4 fragColour;
-void main() { fragColour = vec4(vShade, 1.0); }
+void main() { fragColour = vec4(withWire(vShade), 1.0); }
 )";
 
 const char* kLineVertex = R"(
 layout(location = 0) in vec3 aPosition;
 uniform mat4 uViewProjection;
-void main() {
-    gl_Position = uViewProjection * vec4(aPosition, 1.0);
-    gl_Position.z -= 0.0005 * gl_Position.w; // lines win over the faces they lie on
-}
+void main() { gl_Position = uViewProjection * vec4(aPosition, 1.0); }
 )";
 
 const char* kLineFragment = R"(
@@ -150,11 +181,12 @@ unsigned compile(GLenum type, const std::string& source)
     return s;
 }
 
-unsigned link(const char* version, const char* vertex, const char* fragment, const char* library = "")
+unsigned link(const char* version, const char* vertex, const char* fragment, const std::string& library = "",
+              const std::string& vertexLibrary = "", const std::string& fragmentLibrary = "")
 {
     const std::string head = std::string(version) + "\nprecision highp float;\n" + library;
-    const GLuint vs = compile(GL_VERTEX_SHADER, head + vertex);
-    const GLuint fs = compile(GL_FRAGMENT_SHADER, head + fragment);
+    const GLuint vs = compile(GL_VERTEX_SHADER, head + vertexLibrary + vertex);
+    const GLuint fs = compile(GL_FRAGMENT_SHADER, head + fragmentLibrary + fragment);
     const GLuint p = glCreateProgram();
     glAttachShader(p, vs);
     glAttachShader(p, fs);
@@ -174,28 +206,48 @@ unsigned link(const char* version, const char* vertex, const char* fragment, con
 /// Mean edge length on the screen (pixels) under which the mesh is lit per vertex.
 constexpr float kVertexLitPixels = 5.f;
 
+/// The mesh programs: lit per pixel or per vertex, without or with the wireframe.
+unsigned linkMesh(const char* version, bool perVertex, bool wireframe)
+{
+    const std::string defines = wireframe ? "#define WIREFRAME 1\n" : "";
+    return link(version, perVertex ? kVertexLitVertex : kMeshVertex, perVertex ? kVertexLitFragment : kMeshFragment,
+                defines + kLighting, kWireframeVertex, kWireframeFragment);
+}
+
+/// The mesh's vertex attributes (location 0 position, 1 normal, 2 colour) for a bound array buffer of
+/// MeshVertex.
+void setMeshAttributes()
+{
+    const GLsizei stride = sizeof(MeshVertex);
+    glEnableVertexAttribArray(0);
+    glVertexAttribPointer(0, 3, GL_FLOAT, GL_FALSE, stride, reinterpret_cast<void*>(offsetof(MeshVertex, position)));
+    glEnableVertexAttribArray(1);
+    glVertexAttribPointer(1, 3, GL_SHORT, GL_TRUE, stride, reinterpret_cast<void*>(offsetof(MeshVertex, normal)));
+    glEnableVertexAttribArray(2);
+    glVertexAttribPointer(2, 3, GL_UNSIGNED_BYTE, GL_TRUE, stride, reinterpret_cast<void*>(offsetof(MeshVertex, colour)));
+}
+
 } // namespace
 
 Renderer::Renderer(const char* glslVersion)
 {
-    mMeshProgram = link(glslVersion, kMeshVertex, kMeshFragment, kLighting);
-    mVertexLitProgram = link(glslVersion, kVertexLitVertex, kVertexLitFragment, kLighting);
+    for (int perVertex = 0; perVertex < 2; ++perVertex)
+        for (int wireframe = 0; wireframe < 2; ++wireframe)
+            mMeshPrograms[perVertex][wireframe] = linkMesh(glslVersion, perVertex, wireframe);
     mLineProgram = link(glslVersion, kLineVertex, kLineFragment);
     mSliceProgram = link(glslVersion, kSliceVertex, kSliceFragment);
 
     glGenVertexArrays(1, &mMeshVao);
     glGenBuffers(1, &mMeshVbo);
     glGenBuffers(1, &mTriangleIbo);
-    glGenBuffers(1, &mEdgeIbo);
     glBindVertexArray(mMeshVao);
     glBindBuffer(GL_ARRAY_BUFFER, mMeshVbo);
-    const GLsizei stride = 9 * sizeof(float);
-    glEnableVertexAttribArray(0);
-    glVertexAttribPointer(0, 3, GL_FLOAT, GL_FALSE, stride, reinterpret_cast<void*>(0));
-    glEnableVertexAttribArray(1);
-    glVertexAttribPointer(1, 3, GL_FLOAT, GL_FALSE, stride, reinterpret_cast<void*>(3 * sizeof(float)));
-    glEnableVertexAttribArray(2);
-    glVertexAttribPointer(2, 3, GL_FLOAT, GL_FALSE, stride, reinterpret_cast<void*>(6 * sizeof(float)));
+    setMeshAttributes();
+    glGenVertexArrays(1, &mWireVao);
+    glGenBuffers(1, &mWireVbo);
+    glBindVertexArray(mWireVao);
+    glBindBuffer(GL_ARRAY_BUFFER, mWireVbo);
+    setMeshAttributes();
 
     glGenVertexArrays(1, &mSectionVao);
     glGenBuffers(1, &mSectionVbo);
@@ -231,16 +283,16 @@ Renderer::Renderer(const char* glslVersion)
 
 Renderer::~Renderer()
 {
-    const GLuint buffers[] = {mMeshVbo, mTriangleIbo, mEdgeIbo, mSectionVbo, mSliceVbo, mLayerVbo};
+    const GLuint buffers[] = {mMeshVbo, mTriangleIbo, mWireVbo, mSectionVbo, mSliceVbo, mLayerVbo};
     glDeleteBuffers(6, buffers);
-    const GLuint arrays[] = {mMeshVao, mSectionVao, mSliceVao, mLayerVao};
-    glDeleteVertexArrays(4, arrays);
+    const GLuint arrays[] = {mMeshVao, mWireVao, mSectionVao, mSliceVao, mLayerVao};
+    glDeleteVertexArrays(5, arrays);
     const GLuint textures[] = {mSliceTexture, mLayerTexture};
     glDeleteTextures(mLayerTexture ? 2 : 1, textures);
     if (mLayerFbo) glDeleteFramebuffers(1, &mLayerFbo);
     glDeleteProgram(mLayerProgram);
-    glDeleteProgram(mMeshProgram);
-    glDeleteProgram(mVertexLitProgram);
+    for (auto& programs : mMeshPrograms)
+        for (const GLuint p : programs) glDeleteProgram(p);
     glDeleteProgram(mLineProgram);
     glDeleteProgram(mSliceProgram);
 }
@@ -249,11 +301,23 @@ void Renderer::upload(const Scene& scene)
 {
     if (scene.meshVersion != mMeshVersion) {
         mMeshVersion = scene.meshVersion;
-        glBindVertexArray(mMeshVao);
+        // Packed (24 bytes a vertex instead of 36): 16-bit normals and 8-bit colours, as exact as the
+        // 8-bit image they end in.
+        const std::size_t nv = scene.vertices.size() / 9;
+        mVertices.resize(nv);
+        for (std::size_t i = 0; i < nv; ++i) {
+            const float* f = &scene.vertices[9 * i];
+            MeshVertex& m = mVertices[i];
+            for (int k = 0; k < 3; ++k) {
+                m.position[k] = f[k];
+                m.normal[k] = std::int16_t(std::lround(std::clamp(f[3 + k], -1.f, 1.f) * 32767.f));
+                m.colour[k] = std::uint8_t(std::lround(std::clamp(f[6 + k], 0.f, 1.f) * 255.f));
+            }
+            m.normal[3] = 0;
+            m.colour[3] = 255;
+        }
         glBindBuffer(GL_ARRAY_BUFFER, mMeshVbo);
-        glBufferData(GL_ARRAY_BUFFER, GLsizeiptr(scene.vertices.size() * sizeof(float)), scene.vertices.data(),
-                     GL_DYNAMIC_DRAW);
-        glBindVertexArray(0);
+        glBufferData(GL_ARRAY_BUFFER, GLsizeiptr(nv * sizeof(MeshVertex)), mVertices.data(), GL_DYNAMIC_DRAW);
         glBindBuffer(GL_ARRAY_BUFFER, mSectionVbo);
         glBufferData(GL_ARRAY_BUFFER, GLsizeiptr(scene.section.size() * sizeof(float)), scene.section.data(),
                      GL_DYNAMIC_DRAW);
@@ -311,56 +375,46 @@ void Renderer::upload(const Scene& scene)
 void Renderer::cull(const Scene& scene, const Vec3f& eye)
 {
     // Software WebGL (SwiftShader) shades the vertices and sets up every triangle of a draw before it
-    // culls the back faces: half the mesh's triangles cost that for nothing, and the wireframe's lines
-    // (never culled) all cost a full setup. So the index buffers hold only the triangles that face the
-    // eye, and the edges of those triangles, refilled when the eye or the mesh moves (a pass over the
-    // triangles' planes). GL still culls back faces; the margin keeps the triangles seen edge-on (the
-    // float test may disagree with the rasteriser's about them), so the image is the same.
-    const bool edges = scene.showMesh && scene.wireframe;
+    // culls the back faces: half the mesh's triangles cost that for nothing. So only the triangles
+    // that face the eye are drawn (as indices, or unrolled with the wireframe), refilled when the eye
+    // or the mesh moves (a pass over the triangles' planes). GL still culls back faces; the margin
+    // keeps the triangles seen edge-on (the float test may disagree with the rasteriser's about them),
+    // so the image is the same.
+    const bool wireframe = scene.wireframe;
     if (mCulledVersion == mMeshVersion && mCulledEye[0] == eye.x() && mCulledEye[1] == eye.y() &&
-        mCulledEye[2] == eye.z() && (mCulledEdges || !edges))
+        mCulledEye[2] == eye.z() && mCulledWireframe == wireframe)
         return;
     mCulledVersion = mMeshVersion;
     mCulledEye[0] = eye.x();
     mCulledEye[1] = eye.y();
     mCulledEye[2] = eye.z();
-    mCulledEdges = edges;
+    mCulledWireframe = wireframe;
     const std::size_t nt = mPlanes.size() / 4;
     float extent = 0;
     for (int k = 0; k < 3; ++k) extent = std::max(extent, std::abs(eye[k]));
     const float margin = 1e-4f * std::max(extent, 1.f);
-    mFront.resize(nt);
-    mVisible.resize(scene.triangles.size());
+    if (wireframe) mUnrolled.resize(scene.triangles.size());
+    else mVisible.resize(scene.triangles.size());
     std::size_t n = 0;
     for (std::size_t t = 0; t < nt; ++t) {
         const float* p = &mPlanes[4 * t];
-        const bool front = p[0] * eye.x() + p[1] * eye.y() + p[2] * eye.z() - p[3] > -margin;
-        mFront[t] = front;
-        if (!front) continue;
-        mVisible[n++] = scene.triangles[3 * t];
-        mVisible[n++] = scene.triangles[3 * t + 1];
-        mVisible[n++] = scene.triangles[3 * t + 2];
+        if (p[0] * eye.x() + p[1] * eye.y() + p[2] * eye.z() - p[3] <= -margin) continue;
+        for (int k = 0; k < 3; ++k, ++n) {
+            const std::uint32_t v = scene.triangles[3 * t + k];
+            if (wireframe) mUnrolled[n] = mVertices[v];
+            else mVisible[n] = v;
+        }
     }
-    glBindVertexArray(mMeshVao); // the triangles are the element buffer of the mesh's vertex array
-    glBindBuffer(GL_ELEMENT_ARRAY_BUFFER, mTriangleIbo);
-    glBufferData(GL_ELEMENT_ARRAY_BUFFER, GLsizeiptr(n * sizeof(std::uint32_t)), mVisible.data(), GL_STREAM_DRAW);
-    glBindVertexArray(0);
     mTriangleCount = int(n);
-    mEdgeCount = 0;
-    if (!edges) return;
-    const std::size_t ne = scene.edges.size() / 2;
-    const bool faces = scene.edgeFaces.size() == scene.edges.size();
-    mVisible.resize(scene.edges.size());
-    n = 0;
-    for (std::size_t e = 0; e < ne; ++e) {
-        const std::uint32_t f0 = faces ? scene.edgeFaces[2 * e] : ~0u, f1 = faces ? scene.edgeFaces[2 * e + 1] : ~0u;
-        if (f0 < nt && f1 < nt && !mFront[f0] && !mFront[f1]) continue;
-        mVisible[n++] = scene.edges[2 * e];
-        mVisible[n++] = scene.edges[2 * e + 1];
+    if (wireframe) {
+        glBindBuffer(GL_ARRAY_BUFFER, mWireVbo);
+        glBufferData(GL_ARRAY_BUFFER, GLsizeiptr(n * sizeof(MeshVertex)), mUnrolled.data(), GL_STREAM_DRAW);
+    } else {
+        glBindVertexArray(mMeshVao); // the triangles are the element buffer of the mesh's vertex array
+        glBindBuffer(GL_ELEMENT_ARRAY_BUFFER, mTriangleIbo);
+        glBufferData(GL_ELEMENT_ARRAY_BUFFER, GLsizeiptr(n * sizeof(std::uint32_t)), mVisible.data(), GL_STREAM_DRAW);
+        glBindVertexArray(0);
     }
-    glBindBuffer(GL_ELEMENT_ARRAY_BUFFER, mEdgeIbo);
-    glBufferData(GL_ELEMENT_ARRAY_BUFFER, GLsizeiptr(n * sizeof(std::uint32_t)), mVisible.data(), GL_STREAM_DRAW);
-    mEdgeCount = int(n);
 }
 
 void Renderer::draw(const Scene& scene, int width, int height)
@@ -388,23 +442,18 @@ void Renderer::draw(const Scene& scene, int width, int height)
         // (the mean edge at the camera's target distance under kVertexLitPixels).
         const float pixelsPerUnit = float(height) / (2.f * scene.camera.distance * std::tan(scene.camera.fovY / 2));
         const bool perVertex = scene.lighting == 2 || (scene.lighting == 0 && mMeanEdge * pixelsPerUnit < kVertexLitPixels);
-        const GLuint prog = perVertex ? mVertexLitProgram : mMeshProgram;
+        const GLuint prog = mMeshPrograms[perVertex][mCulledWireframe];
         glUseProgram(prog);
         glUniformMatrix4fv(glGetUniformLocation(prog, "uViewProjection"), 1, GL_FALSE, vp.data());
         glUniform3f(glGetUniformLocation(prog, "uEye"), eye.x(), eye.y(), eye.z());
-        glBindVertexArray(mMeshVao);
-        glDrawElements(GL_TRIANGLES, mTriangleCount, GL_UNSIGNED_INT, nullptr);
+        if (mCulledWireframe) {
+            glBindVertexArray(mWireVao);
+            glDrawArrays(GL_TRIANGLES, 0, mTriangleCount);
+        } else {
+            glBindVertexArray(mMeshVao);
+            glDrawElements(GL_TRIANGLES, mTriangleCount, GL_UNSIGNED_INT, nullptr);
+        }
         glDisable(GL_CULL_FACE);
-    }
-    glUseProgram(mLineProgram);
-    glUniformMatrix4fv(glGetUniformLocation(mLineProgram, "uViewProjection"), 1, GL_FALSE, vp.data());
-    const GLint colour = glGetUniformLocation(mLineProgram, "uColour");
-    if (scene.showMesh && scene.wireframe && mEdgeCount > 0) {
-        glUniform4f(colour, 0.08f, 0.08f, 0.1f, 1.f);
-        glBindVertexArray(mMeshVao);
-        glBindBuffer(GL_ELEMENT_ARRAY_BUFFER, mEdgeIbo); // part of the VAO state: put the triangles back
-        glDrawElements(GL_LINES, mEdgeCount, GL_UNSIGNED_INT, nullptr);
-        glBindBuffer(GL_ELEMENT_ARRAY_BUFFER, mTriangleIbo);
     }
     if (scene.showSlice && mSliceVersion != ~0ull) {
         glUseProgram(mSliceProgram);
@@ -416,7 +465,8 @@ void Renderer::draw(const Scene& scene, int width, int height)
         glDrawArrays(GL_TRIANGLES, 0, 6);
         if (mSectionCount > 0) {
             glUseProgram(mLineProgram);
-            glUniform4f(colour, 1.f, 0.35f, 0.2f, 1.f);
+            glUniformMatrix4fv(glGetUniformLocation(mLineProgram, "uViewProjection"), 1, GL_FALSE, vp.data());
+            glUniform4f(glGetUniformLocation(mLineProgram, "uColour"), 1.f, 0.35f, 0.2f, 1.f);
             glDisable(GL_DEPTH_TEST); // the cross-section stays visible through the mesh
             glBindVertexArray(mSectionVao);
             glDrawArrays(GL_LINES, 0, mSectionCount);

@@ -1,7 +1,7 @@
 // viewer/render.h: draws a Scene with OpenGL 3.3 core (native) or WebGL2 (OpenGL ES 3.0, emscripten).
 //
 // The only file of the viewer that calls GL besides the ImGui backend.
-// Buffers are re-uploaded when the scene's versions change, the mesh's index buffers also when the
+// Buffers are re-uploaded when the scene's versions change, the mesh's visible triangles also when the
 // eye moves (back faces are culled on the CPU); drawing a frame issues a handful of draw calls.
 #pragma once
 
@@ -11,6 +11,14 @@
 #include <vector>
 
 namespace riemesh::viewer {
+
+/// A mesh vertex as the renderer uploads it (24 bytes): world space position, unit normal
+/// (16-bit normalized), colour (8-bit normalized); the 4th normal and colour components are padding.
+struct MeshVertex {
+    float position[3];
+    std::int16_t normal[4];
+    std::uint8_t colour[4];
+};
 
 class Renderer {
 public:
@@ -36,23 +44,25 @@ public:
     void finish();
 
 private:
-    unsigned mMeshProgram = 0, mVertexLitProgram = 0, mLineProgram = 0, mSliceProgram = 0;
-    unsigned mMeshVao = 0, mMeshVbo = 0, mTriangleIbo = 0, mEdgeIbo = 0;
+    unsigned mMeshPrograms[2][2] = {}; ///< [per vertex][wireframe]
+    unsigned mLineProgram = 0, mSliceProgram = 0;
+    unsigned mMeshVao = 0, mMeshVbo = 0, mTriangleIbo = 0, mWireVao = 0, mWireVbo = 0;
     unsigned mSectionVao = 0, mSectionVbo = 0;
     unsigned mSliceVao = 0, mSliceVbo = 0, mSliceTexture = 0;
     unsigned mLayerProgram = 0, mLayerVao = 0, mLayerVbo = 0, mLayerFbo = 0, mLayerTexture = 0;
     int mLayerWidth = 0, mLayerHeight = 0;
     std::uint64_t mMeshVersion = ~0ull, mSliceVersion = ~0ull;
-    int mTriangleCount = 0, mEdgeCount = 0, mSectionCount = 0;
+    int mTriangleCount = 0, mSectionCount = 0; ///< vertices of the mesh's draw; of the section's lines
     float mMeanEdge = 0; ///< world units
+    std::vector<MeshVertex> mVertices;    ///< the uploaded mesh's vertices
     // Back faces culled on the CPU (see cull()): the face planes of the uploaded mesh, the eye and
-    // the display the index buffers were last filled for, and the work arrays.
+    // the display the visible triangles were last gathered for, and the work arrays.
     std::vector<float> mPlanes;           ///< per triangle: unit normal n, n . (a vertex)
-    std::vector<std::uint8_t> mFront;     ///< per triangle: faces the eye
-    std::vector<std::uint32_t> mVisible;  ///< indices of the triangles or edges to draw
+    std::vector<std::uint32_t> mVisible;  ///< indices of the triangles to draw
+    std::vector<MeshVertex> mUnrolled;    ///< with the wireframe: the triangles to draw, unrolled
     std::uint64_t mCulledVersion = ~0ull;
     float mCulledEye[3] = {0, 0, 0};
-    bool mCulledEdges = false;
+    bool mCulledWireframe = false;
     void upload(const Scene& scene);
     void cull(const Scene& scene, const Vec3f& eye);
 };
