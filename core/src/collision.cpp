@@ -268,28 +268,27 @@ std::vector<CollisionPair> findCollisions(const Mesh& mesh, const MetricField& m
         }
         return false;
     };
+    // Longest edge path between a candidate's ends that is no detour around a gap (see kDetour).
+    auto detourLimit = [&](const Candidate& c) { return kDetour * euclideanDistance(c.u, c.w) + detourSlack; };
     int source = -1;
     for (std::size_t k = 0; k < candidates.size(); ++k) {
         const Candidate& c = candidates[k];
-        if (c.crease && closeByTwoEdges(c.u, c.w, kDetour * euclideanDistance(c.u, c.w) + detourSlack)) continue;
+        if (c.crease && closeByTwoEdges(c.u, c.w, detourLimit(c))) continue;
         if (c.u != source) {
             source = c.u;
             double bound = 0;
             for (std::size_t j = k; j < candidates.size() && candidates[j].u == source && bound < pathBound; ++j)
-                bound = std::max(bound, candidates[j].crease
-                                            ? kDetour * euclideanDistance(candidates[j].u, candidates[j].w) + detourSlack
-                                            : pathBound);
+                bound = std::max(bound, candidates[j].crease ? detourLimit(candidates[j]) : pathBound);
             search.run(mesh, VertexHandle(source), std::min(bound, pathBound));
         }
-        // Close along the mesh: a short edge path that is no detour around a gap (see kDetour).
-        if (search.reached(VertexHandle(c.w))) {
-            if (search.distance(VertexHandle(c.w)) <= kDetour * euclideanDistance(c.u, c.w) + detourSlack) continue;
-        }
+        // Close along the mesh: a short edge path that is no detour around a gap.
+        const bool reached = search.reached(VertexHandle(c.w));
+        if (reached && search.distance(VertexHandle(c.w)) <= detourLimit(c)) continue;
         if (c.crease) {
             if (contacts) contacts->push_back({VertexHandle(c.u), VertexHandle(c.w), c.distance});
             continue;
         }
-        if (search.reached(VertexHandle(c.w))) {
+        if (reached) {
             const bool nearMerge =
                 hasMerged && (mesh.property(merged, VertexHandle(c.u)) || mesh.property(merged, VertexHandle(c.w)));
             if (!nearMerge) {
