@@ -209,7 +209,11 @@ openvdb::FloatGrid::Ptr readNifti(const std::string& path, NiftiHeaderInfo* info
     const detail::DenseLayout layout(openvdb::CoordBBox(openvdb::Coord(0), openvdb::Coord(int(nim->nx) - 1,
                                                                                       int(nim->ny) - 1, nz - 1)));
     auto grid = detail::denseToGrid<openvdb::FloatGrid>(values, layout, 0.0f);
-    grid->setTransform(openvdb::math::Transform::createLinearTransform(mat));
+    try { // OpenVDB refuses near-zero axis scales that pass the determinant test (fuzzing found one)
+        grid->setTransform(openvdb::math::Transform::createLinearTransform(mat));
+    } catch (const openvdb::Exception& e) {
+        throw fail("NIfTI " + source + " transform is unusable (" + e.what() + ")");
+    }
     grid->setName(std::filesystem::path(path).filename().string());
     grid->setGridClass(openvdb::GRID_UNKNOWN);
     grid->insertMeta("riemesh:world_space", openvdb::StringMetadata("NIfTI scanner space (RAS, mm) from " + source));
