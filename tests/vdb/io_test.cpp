@@ -137,6 +137,31 @@ TEST_CASE("nifti: a file written with nifticlib reads back with its affine, slop
     CHECK(v.info().dims[0] == 4);
 }
 
+TEST_CASE("nifti: an sform that passes the determinant test but that OpenVDB cannot invert is refused (fuzz_nifti_read finding)")
+{
+    // Columns scaled from 1e-16 to 1e16: det 1.6e-10, above the reader's singularity bound, yet
+    // OpenVDB's AffineMap throws ArithmeticError ("Inversion of singular 4x4 matrix"), which escaped
+    // the reader before ad599a6 (vdb2mesh ended on an uncaught exception).
+    TempDir dir;
+    const std::string path = dir / "bad_sform.nii";
+    const int64_t dims[8] = {3, 2, 2, 2, 1, 1, 1, 1};
+    nifti_image* nim = nifti_make_new_nim(dims, NIFTI_TYPE_FLOAT32, 1);
+    REQUIRE(nim);
+    nim->sform_code = NIFTI_XFORM_SCANNER_ANAT;
+    nim->qform_code = 0;
+    const double S[4][4] = {{-9.46799e-16, -2.28356e-09, -4.07416e-16, 0},
+                            {8.35615e-16, 3.08329e+16, -4.5909e-08, 0},
+                            {-8.26083e-15, -3.73203e+12, 2.79116e-18, 0},
+                            {0, 0, 0, 1}};
+    for (int r = 0; r < 4; ++r)
+        for (int c = 0; c < 4; ++c) nim->sto_xyz.m[r][c] = S[r][c];
+    REQUIRE(nifti_set_filenames(nim, path.c_str(), 0, 1) == 0);
+    nifti_image_write(nim);
+    nifti_image_free(nim);
+    const std::string message = messageOf([&] { readNifti(path); });
+    CHECK(contains(message, "sform transform is unusable"));
+}
+
 TEST_CASE("vdb: round trip of an image, and double grids read as float")
 {
     TempDir dir;
