@@ -17,11 +17,13 @@
 
 #include <nanovdb/util/GridBuilder.h>
 
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <cstring>
 #include <string>
+#include <vector>
 
 using namespace riemesh;
 
@@ -119,59 +121,90 @@ void scaling(bool quick)
 {
     std::printf("\n# cost per iteration against vertex count (ball image, Euclidean, converged sphere)\n");
     // "growth": the exponent k of ms ~ vertices^k from the row above (1 = linear).
-    std::printf("%12s %10s %12s %14s %7s %8s %8s %8s %8s %8s\n", "target", "vertices", "ms/iter", "us/iter/vertex",
-                "growth", "forces", "integr.", "regul.", "collis.", "topol.");
-    double lastMs = 0, lastVertices = 0;
     // The last row is the peer of the one before it: the same run without renumbering the mesh
     // for memory locality (EvolutionOptions::renumber).
+    struct Case {
+        int target = 0;
+        std::unique_ptr<FunctionImage> image;
+        std::unique_ptr<Mesh> mesh;
+        EvolutionOptions options;
+        std::unique_ptr<Evolution> evolution;
+        int stepsPerRound = 1;
+        std::vector<double> ms; ///< every timed step
+        IterationStats::Phases sum;
+    };
+    std::vector<Case> cases;
+    EuclideanMetric metric;
     const int targets[] = {1000, 5000, 20000, 80000, -80000};
     for (int signedTarget : targets) {
         const int target = std::abs(signedTarget);
         if (quick && target > 5000) break;
+        Case c;
+        c.target = target;
         const double radius = 30;
         // Area per vertex on a regular mesh with edges ~1.6 delta: ~ 2.2 delta^2.
         const double delta = std::sqrt(4 * M_PI * radius * radius / (2.2 * target));
         Scene s{"ball", [radius](const Vec3& x) { return ballSdf(x, Vec3::Zero(), radius); },
                 Box3(Vec3::Constant(-40), Vec3::Constant(40))};
-        const auto image = fog(s);
-        EuclideanMetric metric;
+        c.image = std::make_unique<FunctionImage>(fog(s));
         int sub = 0;
         while (20.0 * std::pow(4.0, sub) < 2.0 * target && sub < 8) ++sub;
-        Mesh mesh = makeIcosphere(Vec3::Zero(), radius, sub);
-        EvolutionOptions o;
+        c.mesh = std::make_unique<Mesh>(makeIcosphere(Vec3::Zero(), radius, sub));
+        EvolutionOptions& o = c.options;
         o.delta = delta;
         o.maxIterations = 1000000;
         o.minIterations = 1000000; // never converged: every timed step is a full iteration
         o.renumber = signedTarget > 0;
-        Evolution evolution(mesh, image, metric, o);
-        for (int i = 0; i < 40; ++i) evolution.step(); // settle the sampling
+        c.evolution = std::make_unique<Evolution>(*c.mesh, *c.image, metric, o);
+        for (int i = 0; i < 40; ++i) c.evolution->step(); // settle the sampling
         // The area per vertex is only roughly known: delta is corrected (area ~ 1/delta^2) until the
         // settled count is within 10% of the target.
         for (int round = 0; round < 4; ++round) {
-            const double ratio = double(evolution.history().back().vertices) / target;
+            const double ratio = double(c.evolution->history().back().vertices) / target;
             if (std::abs(ratio - 1) < 0.1) break;
             o.delta *= std::sqrt(ratio);
-            evolution.setOptions(o);
-            for (int i = 0; i < 40; ++i) evolution.step();
+            c.evolution->setOptions(o);
+            for (int i = 0; i < 40; ++i) c.evolution->step();
         }
-        const int n = 50;
-        IterationStats::Phases sum;
-        const double t0 = now();
-        for (int i = 0; i < n; ++i) {
-            const IterationStats::Phases p = evolution.step().phases;
-            sum.forces += p.forces / n, sum.integration += p.integration / n, sum.regularity += p.regularity / n;
-            sum.collisions += p.collisions / n, sum.topology += p.topology / n;
+        // About 60 ms of steps per round (0.5 us per vertex and step as a first guess).
+        c.stepsPerRound = std::clamp(int(60e3 / (0.5 * double(c.mesh->n_vertices()))), 2, 200);
+        cases.push_back(std::move(c));
+    }
+    // The sizes take turns (rounds), so that all of them meet the same machine: on a shared machine
+    // the speed drifts by tens of percent within a minute, which one size after the other would read
+    // as growth. In each turn the first step is not timed (it finds the caches full of the other
+    // sizes' meshes); the row's figure is the median of its timed steps, the phases their means.
+    const int rounds = quick ? 2 : 9;
+    for (int round = 0; round < rounds; ++round)
+        for (Case& c : cases) {
+            c.evolution->step();
+            for (int i = 0; i < c.stepsPerRound; ++i) {
+                const double t0 = now();
+                const IterationStats::Phases p = c.evolution->step().phases;
+                c.ms.push_back((now() - t0) * 1000.0);
+                c.sum.forces += p.forces, c.sum.integration += p.integration, c.sum.regularity += p.regularity;
+                c.sum.collisions += p.collisions, c.sum.topology += p.topology;
+            }
         }
-        const double ms = (now() - t0) * 1000.0 / n;
-        const double vertices = double(mesh.n_vertices());
-        const std::string growth = o.renumber && lastMs > 0
+    std::printf("%12s %10s %12s %14s %7s %8s %8s %8s %8s %8s\n", "target", "vertices", "ms/iter", "us/iter/vertex",
+                "growth", "forces", "integr.", "regul.", "collis.", "topol.");
+    double lastMs = 0, lastVertices = 0;
+    for (Case& c : cases) {
+        std::vector<double>& t = c.ms;
+        std::nth_element(t.begin(), t.begin() + long(t.size() / 2), t.end());
+        const double ms = t[t.size() / 2];
+        const double n = double(t.size());
+        const double vertices = double(c.mesh->n_vertices());
+        const bool renumbered = c.options.renumber;
+        const std::string growth = renumbered && lastMs > 0
             ? std::to_string(std::log(ms / lastMs) / std::log(vertices / lastVertices)).substr(0, 4) : "";
         std::printf("%12s %10zu %12.3f %14.4f %7s %8.2f %8.2f %8.2f %8.2f %8.2f\n",
-                    (std::to_string(target) + (o.renumber ? "" : " as-is")).c_str(), mesh.n_vertices(), ms,
-                    1000.0 * ms / vertices, growth.c_str(), sum.forces, sum.integration, sum.regularity,
-                    sum.collisions, sum.topology);
-        if (o.renumber) lastMs = ms, lastVertices = vertices;
+                    (std::to_string(c.target) + (renumbered ? "" : " as-is")).c_str(), c.mesh->n_vertices(), ms,
+                    1000.0 * ms / vertices, growth.c_str(), c.sum.forces / n, c.sum.integration / n,
+                    c.sum.regularity / n, c.sum.collisions / n, c.sum.topology / n);
+        if (renumbered) lastMs = ms, lastVertices = vertices;
     }
+    std::printf("(%d rounds, the sizes in turn; ms/iter: median step; phases: mean ms)\n", rounds);
 }
 
 /// Runs the scenes; returns the number of runs that did not end as one converged genus-0 surface.
