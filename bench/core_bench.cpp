@@ -1,6 +1,7 @@
 // core_bench: speed of the portable core on analytic images (no OpenVDB).
 //
 //   core_bench [--quick] [--scaling-only]
+//   core_bench --instructions   (the scaling sizes in instructions, under callgrind: see instructions())
 //
 // 1. Cost per iteration against the vertex count (1k, 5k, 20k, 80k vertices on a converged
 //    sphere): one full iteration = forces, integration, regularity, collision, topology.
@@ -17,11 +18,19 @@
 
 #include <nanovdb/util/GridBuilder.h>
 
+#if __has_include(<valgrind/callgrind.h>)
+#include <valgrind/callgrind.h>
+#define RIEMESH_CALLGRIND 1
+#endif
+
 #include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <cstdlib>
 #include <cstring>
+#include <filesystem>
+#include <fstream>
 #include <string>
 #include <vector>
 
@@ -117,29 +126,29 @@ double now()
     return std::chrono::duration<double>(std::chrono::steady_clock::now().time_since_epoch()).count();
 }
 
-void scaling(bool quick)
+/// One size of the scaling table: a converged sphere of about `target` vertices that keeps
+/// evolving (never converges), with what its timed steps measured.
+struct ScalingCase {
+    int target = 0;
+    std::unique_ptr<FunctionImage> image;
+    std::unique_ptr<Mesh> mesh;
+    EvolutionOptions options;
+    std::unique_ptr<Evolution> evolution;
+    int stepsPerRound = 1;
+    std::vector<double> ms; ///< every timed step
+    IterationStats::Phases sum;
+};
+
+/// The sizes 1k, 5k, 20k and 80k (1k and 5k when quick), settled, and a peer of the 80k row
+/// without renumbering (EvolutionOptions::renumber off).
+std::vector<ScalingCase> makeScalingCases(bool quick, const MetricField& metric)
 {
-    std::printf("\n# cost per iteration against vertex count (ball image, Euclidean, converged sphere)\n");
-    // "growth": the exponent k of ms ~ vertices^k from the row above (1 = linear).
-    // The last row is the peer of the one before it: the same run without renumbering the mesh
-    // for memory locality (EvolutionOptions::renumber).
-    struct Case {
-        int target = 0;
-        std::unique_ptr<FunctionImage> image;
-        std::unique_ptr<Mesh> mesh;
-        EvolutionOptions options;
-        std::unique_ptr<Evolution> evolution;
-        int stepsPerRound = 1;
-        std::vector<double> ms; ///< every timed step
-        IterationStats::Phases sum;
-    };
-    std::vector<Case> cases;
-    EuclideanMetric metric;
+    std::vector<ScalingCase> cases;
     const int targets[] = {1000, 5000, 20000, 80000, -80000};
     for (int signedTarget : targets) {
         const int target = std::abs(signedTarget);
         if (quick && target > 5000) break;
-        Case c;
+        ScalingCase c;
         c.target = target;
         const double radius = 30;
         // Area per vertex on a regular mesh with edges ~1.6 delta: ~ 2.2 delta^2.
@@ -170,13 +179,22 @@ void scaling(bool quick)
         c.stepsPerRound = std::clamp(int(60e3 / (0.5 * double(c.mesh->n_vertices()))), 2, 200);
         cases.push_back(std::move(c));
     }
+    return cases;
+}
+
+void scaling(bool quick)
+{
+    std::printf("\n# cost per iteration against vertex count (ball image, Euclidean, converged sphere)\n");
+    // "growth": the exponent k of ms ~ vertices^k from the row above (1 = linear).
+    EuclideanMetric metric;
+    std::vector<ScalingCase> cases = makeScalingCases(quick, metric);
     // The sizes take turns (rounds), so that all of them meet the same machine: on a shared machine
     // the speed drifts by tens of percent within a minute, which one size after the other would read
     // as growth. In each turn the first step is not timed (it finds the caches full of the other
     // sizes' meshes); the row's figure is the median of its timed steps, the phases their means.
     const int rounds = quick ? 2 : 9;
     for (int round = 0; round < rounds; ++round)
-        for (Case& c : cases) {
+        for (ScalingCase& c : cases) {
             c.evolution->step();
             for (int i = 0; i < c.stepsPerRound; ++i) {
                 const double t0 = now();
@@ -189,7 +207,7 @@ void scaling(bool quick)
     std::printf("%12s %10s %12s %14s %7s %8s %8s %8s %8s %8s\n", "target", "vertices", "ms/iter", "us/iter/vertex",
                 "growth", "forces", "integr.", "regul.", "collis.", "topol.");
     double lastMs = 0, lastVertices = 0;
-    for (Case& c : cases) {
+    for (ScalingCase& c : cases) {
         std::vector<double>& t = c.ms;
         std::nth_element(t.begin(), t.begin() + long(t.size() / 2), t.end());
         const double ms = t[t.size() / 2];
@@ -205,6 +223,88 @@ void scaling(bool quick)
         if (renumbered) lastMs = ms, lastVertices = vertices;
     }
     std::printf("(%d rounds, the sizes in turn; ms/iter: median step; phases: mean ms)\n", rounds);
+}
+
+/// --instructions: the scaling table's sizes counted in instructions instead of seconds, which the
+/// machine's load and caches do not move: the program runs itself under callgrind (Debian valgrind)
+/// with instrumentation off except during kCountedSteps steps of each size, each dumped with its
+/// size, then reads the dumps. Instructions per vertex and step that stay flat mean an iteration's
+/// work is linear in the vertex count; the time per vertex then differs only by the memory
+/// hierarchy's costs.
+constexpr int kCountedSteps = 5;
+
+int instructionsChild()
+{
+#ifdef RIEMESH_CALLGRIND
+    EuclideanMetric metric;
+    std::vector<ScalingCase> cases = makeScalingCases(false, metric);
+    for (ScalingCase& c : cases) {
+        c.evolution->step();
+        CALLGRIND_START_INSTRUMENTATION;
+        CALLGRIND_ZERO_STATS;
+        for (int i = 0; i < kCountedSteps; ++i) c.evolution->step();
+        const std::string label = "target=" + std::to_string(c.target) + " vertices=" +
+                                  std::to_string(c.mesh->n_vertices()) + " renumber=" +
+                                  std::to_string(int(c.options.renumber));
+        CALLGRIND_DUMP_STATS_AT(label.c_str());
+        CALLGRIND_STOP_INSTRUMENTATION;
+    }
+    return 0;
+#else
+    return 1;
+#endif
+}
+
+int instructions(const char* self)
+{
+#ifndef RIEMESH_CALLGRIND
+    (void)self;
+    std::printf("core_bench --instructions: built without valgrind/callgrind.h (Debian package valgrind)\n");
+    return 1;
+#else
+    if (RUNNING_ON_VALGRIND) return instructionsChild();
+    char dir[] = "/tmp/core_bench_callgrind.XXXXXX";
+    if (!mkdtemp(dir)) return 1;
+    const std::string out = std::string(dir) + "/cg.out";
+    const std::string command = std::string("valgrind --tool=callgrind --instr-atstart=no --callgrind-out-file=") +
+                                out + " '" + self + "' --instructions >" + dir + "/log 2>&1";
+    std::printf("\n# instructions per iteration against vertex count (the scaling sizes, %d steps each under "
+                "callgrind)\n", kCountedSteps);
+    std::fflush(stdout);
+    const int rc = std::system(command.c_str());
+    std::printf("%12s %10s %16s %16s %7s\n", "target", "vertices", "instr/iter", "instr/iter/vertex", "growth");
+    double lastCount = 0, lastVertices = 0;
+    int rows = 0;
+    for (int dump = 1;; ++dump) {
+        std::ifstream in(out + "." + std::to_string(dump));
+        if (!in) break;
+        std::string line, label;
+        double count = -1;
+        while (std::getline(in, line)) {
+            const std::string trigger = "desc: Trigger: Client Request: ";
+            if (line.rfind(trigger, 0) == 0) label = line.substr(trigger.size());
+            if (line.rfind("summary: ", 0) == 0 || line.rfind("totals: ", 0) == 0)
+                count = std::atof(line.c_str() + line.find(' ') + 1);
+        }
+        int target = 0, renumber = 1;
+        double vertices = 0;
+        if (count < 0 || std::sscanf(label.c_str(), "target=%d vertices=%lf renumber=%d", &target, &vertices, &renumber) != 3)
+            continue;
+        const double perStep = count / kCountedSteps;
+        const std::string growth = renumber && lastCount > 0
+            ? std::to_string(std::log(perStep / lastCount) / std::log(vertices / lastVertices)).substr(0, 4) : "";
+        std::printf("%12s %10.0f %16.0f %16.0f %7s\n", (std::to_string(target) + (renumber ? "" : " as-is")).c_str(),
+                    vertices, perStep, perStep / vertices, growth.c_str());
+        if (renumber) lastCount = perStep, lastVertices = vertices;
+        ++rows;
+    }
+    std::filesystem::remove_all(dir);
+    if (rc != 0 || rows == 0) {
+        std::printf("core_bench --instructions: callgrind failed (exit %d); is valgrind installed?\n", rc);
+        return 1;
+    }
+    return 0;
+#endif
 }
 
 /// Runs the scenes; returns the number of runs that did not end as one converged genus-0 surface.
@@ -255,6 +355,7 @@ int fullRuns(bool quick)
 int main(int argc, char** argv)
 {
     const bool quick = argc > 1 && std::strcmp(argv[1], "--quick") == 0;
+    if (argc > 1 && std::strcmp(argv[1], "--instructions") == 0) return instructions(argv[0]);
     // --scaling-only: just the per-iteration cost table (for profilers such as callgrind).
     const bool scalingOnly = argc > 1 && std::strcmp(argv[argc - 1], "--scaling-only") == 0;
     std::printf("riemesh core_bench%s (one thread)\n", quick ? " --quick" : "");
