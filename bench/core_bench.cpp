@@ -137,6 +137,10 @@ struct ScalingCase {
     int stepsPerRound = 1;
     std::vector<double> ms; ///< every timed step
     IterationStats::Phases sum;
+    /// The peer: OpenMesh's own update_normals() (face normals, then each vertex's one ring) on a
+    /// copy of the settled mesh, a plain linear pass timed in the same turns.
+    std::unique_ptr<Mesh> peer;
+    std::vector<double> peerMs;
 };
 
 /// The sizes 1k, 5k, 20k and 80k (1k and 5k when quick), settled, and a peer of the 80k row
@@ -177,6 +181,9 @@ std::vector<ScalingCase> makeScalingCases(bool quick, const MetricField& metric)
         }
         // About 60 ms of steps per round (0.5 us per vertex and step as a first guess).
         c.stepsPerRound = std::clamp(int(60e3 / (0.5 * double(c.mesh->n_vertices()))), 2, 200);
+        c.peer = std::make_unique<Mesh>(*c.mesh);
+        c.peer->request_face_normals();
+        c.peer->request_vertex_normals();
         cases.push_back(std::move(c));
     }
     return cases;
@@ -203,26 +210,42 @@ void scaling(bool quick)
                 c.sum.forces += p.forces, c.sum.integration += p.integration, c.sum.regularity += p.regularity;
                 c.sum.collisions += p.collisions, c.sum.topology += p.topology;
             }
+            c.peer->update_normals();
+            for (int i = 0; i < c.stepsPerRound; ++i) {
+                const double t0 = now();
+                c.peer->update_normals();
+                c.peerMs.push_back((now() - t0) * 1000.0);
+            }
         }
-    std::printf("%12s %10s %12s %14s %7s %8s %8s %8s %8s %8s\n", "target", "vertices", "ms/iter", "us/iter/vertex",
-                "growth", "forces", "integr.", "regul.", "collis.", "topol.");
+    std::printf("%12s %10s %12s %14s %7s %8s %8s %8s %8s %8s %10s\n", "target", "vertices", "ms/iter", "us/iter/vertex",
+                "growth", "forces", "integr.", "regul.", "collis.", "topol.", "peer us/v");
+    auto median = [](std::vector<double>& t) {
+        std::nth_element(t.begin(), t.begin() + long(t.size() / 2), t.end());
+        return t[t.size() / 2];
+    };
+    double firstUs = 0, firstPeerUs = 0, lastUs = 0, lastPeerUs = 0;
     double lastMs = 0, lastVertices = 0;
     for (ScalingCase& c : cases) {
-        std::vector<double>& t = c.ms;
-        std::nth_element(t.begin(), t.begin() + long(t.size() / 2), t.end());
-        const double ms = t[t.size() / 2];
-        const double n = double(t.size());
+        const double ms = median(c.ms);
+        const double n = double(c.ms.size());
         const double vertices = double(c.mesh->n_vertices());
         const bool renumbered = c.options.renumber;
         const std::string growth = renumbered && lastMs > 0
             ? std::to_string(std::log(ms / lastMs) / std::log(vertices / lastVertices)).substr(0, 4) : "";
-        std::printf("%12s %10zu %12.3f %14.4f %7s %8.2f %8.2f %8.2f %8.2f %8.2f\n",
+        const double peerUs = 1000.0 * median(c.peerMs) / vertices;
+        std::printf("%12s %10zu %12.3f %14.4f %7s %8.2f %8.2f %8.2f %8.2f %8.2f %10.4f\n",
                     (std::to_string(c.target) + (renumbered ? "" : " as-is")).c_str(), c.mesh->n_vertices(), ms,
                     1000.0 * ms / vertices, growth.c_str(), c.sum.forces / n, c.sum.integration / n,
-                    c.sum.regularity / n, c.sum.collisions / n, c.sum.topology / n);
-        if (renumbered) lastMs = ms, lastVertices = vertices;
+                    c.sum.regularity / n, c.sum.collisions / n, c.sum.topology / n, peerUs);
+        if (!renumbered) continue;
+        lastMs = ms, lastVertices = vertices;
+        lastUs = 1000.0 * ms / vertices, lastPeerUs = peerUs;
+        if (firstUs == 0) firstUs = lastUs, firstPeerUs = peerUs;
     }
-    std::printf("(%d rounds, the sizes in turn; ms/iter: median step; phases: mean ms)\n", rounds);
+    std::printf("(%d rounds, the sizes in turn; ms/iter: median step; phases: mean ms; peer: OpenMesh "
+                "update_normals() on a copy of the mesh, median)\n", rounds);
+    std::printf("per-vertex cost, largest over smallest size: riemesh iteration %.2fx, OpenMesh update_normals %.2fx\n",
+                lastUs / firstUs, lastPeerUs / firstPeerUs);
 }
 
 /// --instructions: the scaling table's sizes counted in instructions instead of seconds, which the
