@@ -615,9 +615,12 @@ void App::exportMesh(const char* extension)
 
 void App::drawPanels()
 {
+    // The panel fits its content as sections open and close (up to the window's height, then it
+    // scrolls), 340 pixels wide.
     ImGui::SetNextWindowPos(ImVec2(8, 8), ImGuiCond_FirstUseEver);
-    ImGui::SetNextWindowSize(ImVec2(340, 0), ImGuiCond_FirstUseEver);
-    ImGui::Begin("riemesh");
+    const float tallest = std::max(120.f, ImGui::GetIO().DisplaySize.y - 16.f);
+    ImGui::SetNextWindowSizeConstraints(ImVec2(340, 0), ImVec2(340, tallest));
+    ImGui::Begin("riemesh", nullptr, ImGuiWindowFlags_AlwaysAutoResize);
     ImGui::TextWrapped("%s", mVolumeName.c_str());
     if (!mMessage.empty()) ImGui::TextColored(ImVec4(1.f, 0.45f, 0.35f, 1.f), "%s", mMessage.c_str());
 
@@ -733,7 +736,7 @@ void App::drawPanels()
         if (ImGui::Button("Frame (F)")) frameCamera();
         ImGui::SameLine();
         if (ImGui::Button("Home (H)")) homeCamera();
-        ImGui::TextDisabled("drag: orbit  right/shift-drag: pan  wheel: zoom");
+        textDisabledWrapped("drag: orbit  right/shift-drag: pan  wheel: zoom");
     }
 
     // --- files
