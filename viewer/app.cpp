@@ -727,6 +727,7 @@ void App::drawPanels()
         ImGui::Checkbox("wireframe", &mScene.wireframe);
         ImGui::SameLine();
         ImGui::Checkbox("slice", &mScene.showSlice);
+        ImGui::Checkbox("cut the mesh at the slice", &mScene.clipAtSlice);
         bool slice = ImGui::Combo("slice axis", &mSliceAxis, kAxisNames, 3);
         slice |= ImGui::SliderFloat("slice position", &mSlicePosition, 0.f, 1.f, "%.2f");
         const float range = float(mImageMax - mImageMin);
@@ -798,6 +799,7 @@ bool App::setParameter(const std::string& name, double value)
     if (name == "lighting") { mScene.lighting = std::clamp(int(value), 0, 2); return true; }
     if (name == "show_mesh") { mScene.showMesh = value != 0; return true; }
     if (name == "show_slice") { mScene.showSlice = value != 0; return true; }
+    if (name == "clip") { mScene.clipAtSlice = value != 0; return true; }
     if (name == "slice_axis" || name == "slice_position") {
         if (name == "slice_axis") mSliceAxis = std::clamp(int(value), 0, 2);
         else mSlicePosition = float(std::clamp(value, 0.0, 1.0));

@@ -69,6 +69,9 @@ struct Scene {
     SliceImage slice;
     std::uint64_t meshVersion = 0, sliceVersion = 0;
     bool showMesh = true, wireframe = false, showSlice = true;
+    /// Cut the mesh away on the eye's side of the slice (while the slice is shown), so that the
+    /// image inside the surface can be seen with the cross-section on it.
+    bool clipAtSlice = false;
     /// Mesh lighting: 0 automatic (per vertex when the mesh's edges are under 5 pixels on the screen,
     /// where it looks the same and costs software WebGL much less), 1 per pixel, 2 per vertex.
     int lighting = 0;

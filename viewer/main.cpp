@@ -120,7 +120,8 @@ std::uint64_t sceneSignature(const riemesh::viewer::Scene& scene, int width, int
                             scene.background.x(), scene.background.y(), scene.background.z()};
     const std::uint64_t other[] = {scene.meshVersion, scene.sliceVersion,
                                    std::uint64_t(scene.showMesh) | std::uint64_t(scene.wireframe) << 1 |
-                                       std::uint64_t(scene.showSlice) << 2 | std::uint64_t(scene.lighting) << 3,
+                                       std::uint64_t(scene.showSlice) << 2 | std::uint64_t(scene.lighting) << 3 |
+                                       std::uint64_t(scene.clipAtSlice) << 5,
                                    std::uint64_t(std::uint32_t(width)) << 32 | std::uint32_t(height)};
     h.mix(camera, sizeof camera);
     h.mix(other, sizeof other);

@@ -32,7 +32,30 @@ void main() {
     vPosition = aPosition;
     gl_Position = uViewProjection * vec4(aPosition, 1.0);
     setCorner();
+    setClip(aPosition);
 }
+)";
+
+// The cut at the slice (CLIP defined): fragments on the eye's side of the plane uClipPlane
+// (n . x > w) are discarded. Only the triangles that straddle the plane are drawn with it (see
+// Renderer::cull): a discard costs software WebGL its early depth test.
+const char* kClipVertex = R"(
+#ifdef CLIP
+uniform vec4 uClipPlane;
+out float vClip;
+void setClip(vec3 p) { vClip = dot(p, uClipPlane.xyz) - uClipPlane.w; }
+#else
+void setClip(vec3 p) {}
+#endif
+)";
+
+const char* kClipFragment = R"(
+#ifdef CLIP
+in highp float vClip;
+void clip() { if (vClip > 0.0) discard; }
+#else
+void clip() {}
+#endif
 )";
 
 // The wireframe, drawn by the faces themselves (WIREFRAME defined): the triangles are drawn unrolled
@@ -93,7 +116,10 @@ in vec3 vColour;
 in vec3 vPosition;
 uniform vec3 uEye;
 out vec4 fragColour;
-void main() { fragColour = vec4(withWire(lit(vNormal, vColour, uEye - vPosition)), 1.0); }
+void main() {
+    clip();
+    fragColour = vec4(withWire(lit(vNormal, vColour, uEye - vPosition)), 1.0);
+}
 )";
 
 // Per-vertex lighting (Gouraud): the same lighting at the vertices, interpolated. For a mesh whose
@@ -110,6 +136,7 @@ void main() {
     vShade = lit(aNormal, aColour, uEye - aPosition);
     gl_Position = uViewProjection * vec4(aPosition, 1.0);
     setCorner();
+    setClip(aPosition);
 }
 )";
 
@@ -117,7 +144,10 @@ const char* kVertexLitFragment = R"(
 precision mediump float;
 in vec3 vShade;
 out vec4 fragColour;
-void main() { fragColour = vec4(withWire(vShade), 1.0); }
+void main() {
+    clip();
+    fragColour = vec4(withWire(vShade), 1.0);
+}
 )";
 
 const char* kLineVertex = R"(
@@ -206,12 +236,14 @@ unsigned link(const char* version, const char* vertex, const char* fragment, con
 /// Mean edge length on the screen (pixels) under which the mesh is lit per vertex.
 constexpr float kVertexLitPixels = 5.f;
 
-/// The mesh programs: lit per pixel or per vertex, without or with the wireframe.
-unsigned linkMesh(const char* version, bool perVertex, bool wireframe)
+/// The mesh programs: lit per pixel or per vertex, without or with the wireframe, without or with
+/// the cut at the slice.
+unsigned linkMesh(const char* version, bool perVertex, bool wireframe, bool clip)
 {
-    const std::string defines = wireframe ? "#define WIREFRAME 1\n" : "";
+    const std::string defines = std::string(wireframe ? "#define WIREFRAME 1\n" : "") + (clip ? "#define CLIP 1\n" : "");
     return link(version, perVertex ? kVertexLitVertex : kMeshVertex, perVertex ? kVertexLitFragment : kMeshFragment,
-                defines + kLighting, kWireframeVertex, kWireframeFragment);
+                defines + kLighting, std::string(kWireframeVertex) + kClipVertex,
+                std::string(kWireframeFragment) + kClipFragment);
 }
 
 /// The mesh's vertex attributes (location 0 position, 1 normal, 2 colour) for a bound array buffer of
@@ -233,7 +265,8 @@ Renderer::Renderer(const char* glslVersion)
 {
     for (int perVertex = 0; perVertex < 2; ++perVertex)
         for (int wireframe = 0; wireframe < 2; ++wireframe)
-            mMeshPrograms[perVertex][wireframe] = linkMesh(glslVersion, perVertex, wireframe);
+            for (int clip = 0; clip < 2; ++clip)
+                mMeshPrograms[perVertex][wireframe][clip] = linkMesh(glslVersion, perVertex, wireframe, clip);
     mLineProgram = link(glslVersion, kLineVertex, kLineFragment);
     mSliceProgram = link(glslVersion, kSliceVertex, kSliceFragment);
 
@@ -291,8 +324,9 @@ Renderer::~Renderer()
     glDeleteTextures(mLayerTexture ? 2 : 1, textures);
     if (mLayerFbo) glDeleteFramebuffers(1, &mLayerFbo);
     glDeleteProgram(mLayerProgram);
-    for (auto& programs : mMeshPrograms)
-        for (const GLuint p : programs) glDeleteProgram(p);
+    for (auto& byWireframe : mMeshPrograms)
+        for (auto& programs : byWireframe)
+            for (const GLuint p : programs) glDeleteProgram(p);
     glDeleteProgram(mLineProgram);
     glDeleteProgram(mSliceProgram);
 }
@@ -372,7 +406,7 @@ void Renderer::upload(const Scene& scene)
     }
 }
 
-void Renderer::cull(const Scene& scene, const Vec3f& eye)
+void Renderer::cull(const Scene& scene, const Vec3f& eye, const float* clipPlane)
 {
     // Software WebGL (SwiftShader) shades the vertices and sets up every triangle of a draw before it
     // culls the back faces: half the mesh's triangles cost that for nothing. So only the triangles
@@ -380,39 +414,62 @@ void Renderer::cull(const Scene& scene, const Vec3f& eye)
     // or the mesh moves (a pass over the triangles' planes). GL still culls back faces; the margin
     // keeps the triangles seen edge-on (the float test may disagree with the rasteriser's about them),
     // so the image is the same.
+    // With a cut (clipPlane: n, w; the eye's side n . x > w goes), triangles wholly on the eye's side
+    // are dropped too, and those across the plane are put last (mStraddleCount corners), for the
+    // program that discards the cut-away part of them.
     const bool wireframe = scene.wireframe;
+    const float noPlane[4] = {0, 0, 0, 0};
+    const float* plane = clipPlane ? clipPlane : noPlane;
     if (mCulledVersion == mMeshVersion && mCulledEye[0] == eye.x() && mCulledEye[1] == eye.y() &&
-        mCulledEye[2] == eye.z() && mCulledWireframe == wireframe)
+        mCulledEye[2] == eye.z() && mCulledWireframe == wireframe && std::equal(plane, plane + 4, mCulledPlane))
         return;
     mCulledVersion = mMeshVersion;
     mCulledEye[0] = eye.x();
     mCulledEye[1] = eye.y();
     mCulledEye[2] = eye.z();
     mCulledWireframe = wireframe;
+    std::copy(plane, plane + 4, mCulledPlane);
     const std::size_t nt = mPlanes.size() / 4;
     float extent = 0;
     for (int k = 0; k < 3; ++k) extent = std::max(extent, std::abs(eye[k]));
     const float margin = 1e-4f * std::max(extent, 1.f);
     if (wireframe) mUnrolled.resize(scene.triangles.size());
     else mVisible.resize(scene.triangles.size());
-    std::size_t n = 0;
+    std::size_t n = 0, straddle = 0; // corners kept whole from the front, across the cut from the back
+    const std::size_t total = scene.triangles.size();
     for (std::size_t t = 0; t < nt; ++t) {
         const float* p = &mPlanes[4 * t];
         if (p[0] * eye.x() + p[1] * eye.y() + p[2] * eye.z() - p[3] <= -margin) continue;
-        for (int k = 0; k < 3; ++k, ++n) {
-            const std::uint32_t v = scene.triangles[3 * t + k];
-            if (wireframe) mUnrolled[n] = mVertices[v];
-            else mVisible[n] = v;
+        const std::uint32_t* corner = &scene.triangles[3 * t];
+        bool across = false;
+        if (clipPlane) {
+            int gone = 0;
+            for (int k = 0; k < 3; ++k) {
+                const float* x = mVertices[corner[k]].position;
+                gone += plane[0] * x[0] + plane[1] * x[1] + plane[2] * x[2] > plane[3];
+            }
+            if (gone == 3) continue;
+            across = gone > 0;
+        }
+        const std::size_t at = across ? total - (straddle += 3) : (n += 3) - 3;
+        for (int k = 0; k < 3; ++k) {
+            if (wireframe) mUnrolled[at + std::size_t(k)] = mVertices[corner[k]];
+            else mVisible[at + std::size_t(k)] = corner[k];
         }
     }
+    // The triangles across the cut follow the others directly.
+    if (wireframe) std::copy(mUnrolled.begin() + long(total - straddle), mUnrolled.end(), mUnrolled.begin() + long(n));
+    else std::copy(mVisible.begin() + long(total - straddle), mVisible.end(), mVisible.begin() + long(n));
     mTriangleCount = int(n);
+    mStraddleCount = int(straddle);
+    const std::size_t corners = n + straddle;
     if (wireframe) {
         glBindBuffer(GL_ARRAY_BUFFER, mWireVbo);
-        glBufferData(GL_ARRAY_BUFFER, GLsizeiptr(n * sizeof(MeshVertex)), mUnrolled.data(), GL_STREAM_DRAW);
+        glBufferData(GL_ARRAY_BUFFER, GLsizeiptr(corners * sizeof(MeshVertex)), mUnrolled.data(), GL_STREAM_DRAW);
     } else {
         glBindVertexArray(mMeshVao); // the triangles are the element buffer of the mesh's vertex array
         glBindBuffer(GL_ELEMENT_ARRAY_BUFFER, mTriangleIbo);
-        glBufferData(GL_ELEMENT_ARRAY_BUFFER, GLsizeiptr(n * sizeof(std::uint32_t)), mVisible.data(), GL_STREAM_DRAW);
+        glBufferData(GL_ELEMENT_ARRAY_BUFFER, GLsizeiptr(corners * sizeof(std::uint32_t)), mVisible.data(), GL_STREAM_DRAW);
         glBindVertexArray(0);
     }
 }
@@ -431,9 +488,22 @@ void Renderer::draw(const Scene& scene, int width, int height)
 
     const Mat4f vp = scene.camera.projection(float(width) / float(height)) * scene.camera.view();
     const Vec3f eye = scene.camera.eye();
-    if (scene.showMesh) cull(scene, eye);
+    // The cut at the slice: the plane through its corners, its normal toward the eye.
+    float plane[4] = {0, 0, 0, 0};
+    const bool clip = scene.clipAtSlice && scene.showSlice && mSliceVersion != ~0ull;
+    if (clip) {
+        const Vec3f* c = scene.slice.corners;
+        Vec3f n = (c[1] - c[0]).cross(c[3] - c[0]);
+        n = n.norm() > 0 ? Vec3f(n.normalized()) : Vec3f::UnitZ();
+        if (n.dot(eye - c[0]) < 0) n = -n;
+        plane[0] = n.x();
+        plane[1] = n.y();
+        plane[2] = n.z();
+        plane[3] = n.dot(c[0]);
+    }
+    if (scene.showMesh) cull(scene, eye, clip ? plane : nullptr);
 
-    if (scene.showMesh && mTriangleCount > 0) {
+    if (scene.showMesh && mTriangleCount + mStraddleCount > 0) {
         // The mesh is closed and oriented outward (counter-clockwise seen from outside): its back
         // faces are always hidden, and culling them halves what software WebGL rasterises.
         glEnable(GL_CULL_FACE);
@@ -442,16 +512,23 @@ void Renderer::draw(const Scene& scene, int width, int height)
         // (the mean edge at the camera's target distance under kVertexLitPixels).
         const float pixelsPerUnit = float(height) / (2.f * scene.camera.distance * std::tan(scene.camera.fovY / 2));
         const bool perVertex = scene.lighting == 2 || (scene.lighting == 0 && mMeanEdge * pixelsPerUnit < kVertexLitPixels);
-        const GLuint prog = mMeshPrograms[perVertex][mCulledWireframe];
-        glUseProgram(prog);
-        glUniformMatrix4fv(glGetUniformLocation(prog, "uViewProjection"), 1, GL_FALSE, vp.data());
-        glUniform3f(glGetUniformLocation(prog, "uEye"), eye.x(), eye.y(), eye.z());
-        if (mCulledWireframe) {
-            glBindVertexArray(mWireVao);
-            glDrawArrays(GL_TRIANGLES, 0, mTriangleCount);
-        } else {
-            glBindVertexArray(mMeshVao);
-            glDrawElements(GL_TRIANGLES, mTriangleCount, GL_UNSIGNED_INT, nullptr);
+        // The whole triangles, then those across the cut with the program that discards its far part.
+        const int first[2] = {0, mTriangleCount}, count[2] = {mTriangleCount, mStraddleCount};
+        for (int cut = 0; cut < 2; ++cut) {
+            if (count[cut] == 0) continue;
+            const GLuint prog = mMeshPrograms[perVertex][mCulledWireframe][cut];
+            glUseProgram(prog);
+            glUniformMatrix4fv(glGetUniformLocation(prog, "uViewProjection"), 1, GL_FALSE, vp.data());
+            glUniform3f(glGetUniformLocation(prog, "uEye"), eye.x(), eye.y(), eye.z());
+            if (cut) glUniform4f(glGetUniformLocation(prog, "uClipPlane"), plane[0], plane[1], plane[2], plane[3]);
+            if (mCulledWireframe) {
+                glBindVertexArray(mWireVao);
+                glDrawArrays(GL_TRIANGLES, first[cut], count[cut]);
+            } else {
+                glBindVertexArray(mMeshVao);
+                glDrawElements(GL_TRIANGLES, count[cut], GL_UNSIGNED_INT,
+                               reinterpret_cast<void*>(std::size_t(first[cut]) * sizeof(std::uint32_t)));
+            }
         }
         glDisable(GL_CULL_FACE);
     }

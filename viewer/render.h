@@ -44,7 +44,7 @@ public:
     void finish();
 
 private:
-    unsigned mMeshPrograms[2][2] = {}; ///< [per vertex][wireframe]
+    unsigned mMeshPrograms[2][2][2] = {}; ///< [per vertex][wireframe][cut at the slice]
     unsigned mLineProgram = 0, mSliceProgram = 0;
     unsigned mMeshVao = 0, mMeshVbo = 0, mTriangleIbo = 0, mWireVao = 0, mWireVbo = 0;
     unsigned mSectionVao = 0, mSectionVbo = 0;
@@ -53,6 +53,7 @@ private:
     int mLayerWidth = 0, mLayerHeight = 0;
     std::uint64_t mMeshVersion = ~0ull, mSliceVersion = ~0ull;
     int mTriangleCount = 0, mSectionCount = 0; ///< vertices of the mesh's draw; of the section's lines
+    int mStraddleCount = 0; ///< vertices of the triangles across the cut, drawn after mTriangleCount
     float mMeanEdge = 0; ///< world units
     std::vector<MeshVertex> mVertices;    ///< the uploaded mesh's vertices
     // Back faces culled on the CPU (see cull()): the face planes of the uploaded mesh, the eye and
@@ -63,8 +64,9 @@ private:
     std::uint64_t mCulledVersion = ~0ull;
     float mCulledEye[3] = {0, 0, 0};
     bool mCulledWireframe = false;
+    float mCulledPlane[4] = {0, 0, 0, 0}; ///< the cut (n, w) the triangles were gathered for; 0 for none
     void upload(const Scene& scene);
-    void cull(const Scene& scene, const Vec3f& eye);
+    void cull(const Scene& scene, const Vec3f& eye, const float* clipPlane);
 };
 
 } // namespace riemesh::viewer

@@ -2,7 +2,8 @@
 // Chromium (playwright-core, /usr/bin/chromium, a fresh profile), waits for the model to converge
 // ("riemesh: converged iterations=N vertices=V seconds=S" on the console), checks there were no page
 // errors, screenshots the page and checks the canvas is drawn (many colours, not just background),
-// then exercises the play/pause control through the keyboard and the JS API.
+// cuts the mesh at the slice and back (JS API), then exercises the play/pause control through the
+// keyboard and the JS API.
 //
 // Usage: node tests/web/page_test.mjs [WEB_DIR] [OUT_DIR]
 //   WEB_DIR defaults to build-wasm/web, OUT_DIR (screenshots, console log) to build-wasm/web-test.
@@ -61,12 +62,15 @@ async function analyse(context, png, clip) {
     const { data } = g.getImageData(clip.x, clip.y, clip.width, clip.height);
     const colours = new Set();
     const bg = [data[0], data[1], data[2]];
-    let differ = 0;
+    let differ = 0, saturated = 0;
     for (let i = 0; i < data.length; i += 4) {
       colours.add((data[i] << 16) | (data[i + 1] << 8) | data[i + 2]);
       if (Math.abs(data[i] - bg[0]) + Math.abs(data[i + 1] - bg[1]) + Math.abs(data[i + 2] - bg[2]) > 24) differ++;
+      // The mesh's colours (not the grey slice, not the grey-blue background).
+      if (Math.max(data[i], data[i + 1], data[i + 2]) - Math.min(data[i], data[i + 1], data[i + 2]) > 40) saturated++;
     }
-    return { colours: colours.size, drawn: differ / (data.length / 4) };
+    const n = data.length / 4;
+    return { colours: colours.size, drawn: differ / n, mesh: saturated / n };
   }, { b64: png.toString('base64'), clip });
   await scratch.close();
   return stats;
@@ -113,6 +117,20 @@ try {
   const view = await analyse(context, shot, { x: 400, y: 40, width: 860, height: 740 });
   check('the canvas is drawn (many colours, mesh covers part of the view)', view.colours > 64 && view.drawn > 0.05,
         `${view.colours} colours, ${(100 * view.drawn).toFixed(1)}% of the view differs from the background`);
+
+  // Display control through the JS API: cutting the mesh at the slice (z, halfway) takes away its
+  // upper half and shows the image inside; turning the cut off brings the mesh back.
+  await page.evaluate(() => window.riemesh.set('clip', 1));
+  await sleep(500);
+  const cut = await analyse(context, await page.screenshot({ path: path.join(outDir, 'page-cut.png') }),
+                            { x: 400, y: 40, width: 860, height: 740 });
+  await page.evaluate(() => window.riemesh.set('clip', 0));
+  await sleep(500);
+  const uncut = await analyse(context, await page.screenshot(), { x: 400, y: 40, width: 860, height: 740 });
+  check('cutting the mesh at the slice hides the mesh above it, and only while the cut is on',
+        cut.mesh < 0.6 * view.mesh && Math.abs(uncut.mesh - view.mesh) < 0.1 * view.mesh,
+        `mesh-coloured share of the view ${(100 * view.mesh).toFixed(1)}% -> ${(100 * cut.mesh).toFixed(1)}% cut -> ` +
+        `${(100 * uncut.mesh).toFixed(1)}% uncut`);
 
   // Control: space pauses (keyboard through GLFW and ImGui into the app), reset restarts from the box,
   // space plays again.
@@ -165,6 +183,6 @@ try {
   fs.rmSync(profile, { recursive: true, force: true });
 }
 const failed = results.filter((r) => !r.ok).length;
-console.log(`screenshots: ${outDir}/page.png, page-evolving.png, page-head.png`);
+console.log(`screenshots: ${outDir}/page.png, page-cut.png, page-evolving.png, page-head.png`);
 console.log(`web: ${results.length - failed} passed, ${failed} failed`);
 process.exit(failed ? 1 : 0);
