@@ -54,6 +54,19 @@ std::string messageOf(const std::function<void()>& f)
 
 bool contains(const std::string& s, const std::string& part) { return s.find(part) != std::string::npos; }
 
+/// Gives `nim` (from nifti_make_new_nim) the scanner-space sform S (rows of the 4x4 index -> mm
+/// matrix, no qform), writes it to `path` and frees it.
+void writeWithSform(nifti_image* nim, const std::string& path, const double (&S)[4][4])
+{
+    nim->sform_code = NIFTI_XFORM_SCANNER_ANAT;
+    nim->qform_code = 0;
+    for (int r = 0; r < 4; ++r)
+        for (int c = 0; c < 4; ++c) nim->sto_xyz.m[r][c] = S[r][c];
+    REQUIRE(nifti_set_filenames(nim, path.c_str(), 0, 1) == 0);
+    nifti_image_write(nim);
+    nifti_image_free(nim);
+}
+
 } // namespace
 
 TEST_CASE("nifti: Colin27 ch2.nii.gz reads as 181x217x181 voxels of 1 mm in scanner space")
@@ -109,14 +122,7 @@ TEST_CASE("nifti: a file written with nifticlib reads back with its affine, slop
     nim->scl_slope = 0.5;
     nim->scl_inter = -3.0;
     // sform: spacing (2, 1, 3) mm with a 90 degree rotation about z and an offset.
-    nim->sform_code = NIFTI_XFORM_SCANNER_ANAT;
-    nim->qform_code = 0;
-    double S[4][4] = {{0, -1, 0, 10}, {2, 0, 0, -20}, {0, 0, 3, 5}, {0, 0, 0, 1}};
-    for (int r = 0; r < 4; ++r)
-        for (int c = 0; c < 4; ++c) nim->sto_xyz.m[r][c] = S[r][c];
-    REQUIRE(nifti_set_filenames(nim, path.c_str(), 0, 1) == 0);
-    nifti_image_write(nim);
-    nifti_image_free(nim);
+    writeWithSform(nim, path, {{0, -1, 0, 10}, {2, 0, 0, -20}, {0, 0, 3, 5}, {0, 0, 0, 1}});
 
     NiftiHeaderInfo info;
     auto grid = readNifti(path, &info);
@@ -147,17 +153,10 @@ TEST_CASE("nifti: an sform that passes the determinant test but that OpenVDB can
     const int64_t dims[8] = {3, 2, 2, 2, 1, 1, 1, 1};
     nifti_image* nim = nifti_make_new_nim(dims, NIFTI_TYPE_FLOAT32, 1);
     REQUIRE(nim);
-    nim->sform_code = NIFTI_XFORM_SCANNER_ANAT;
-    nim->qform_code = 0;
-    const double S[4][4] = {{-9.46799e-16, -2.28356e-09, -4.07416e-16, 0},
-                            {8.35615e-16, 3.08329e+16, -4.5909e-08, 0},
-                            {-8.26083e-15, -3.73203e+12, 2.79116e-18, 0},
-                            {0, 0, 0, 1}};
-    for (int r = 0; r < 4; ++r)
-        for (int c = 0; c < 4; ++c) nim->sto_xyz.m[r][c] = S[r][c];
-    REQUIRE(nifti_set_filenames(nim, path.c_str(), 0, 1) == 0);
-    nifti_image_write(nim);
-    nifti_image_free(nim);
+    writeWithSform(nim, path, {{-9.46799e-16, -2.28356e-09, -4.07416e-16, 0},
+                               {8.35615e-16, 3.08329e+16, -4.5909e-08, 0},
+                               {-8.26083e-15, -3.73203e+12, 2.79116e-18, 0},
+                               {0, 0, 0, 1}});
     const std::string message = messageOf([&] { readNifti(path); });
     CHECK(contains(message, "sform transform is unusable"));
 }
