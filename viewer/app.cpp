@@ -231,7 +231,12 @@ bool App::loadVolume(const std::string& path)
                     mVolume->imageName().c_str(), mVolumeMetric ? ", with metric" : ", no metric");
         return true;
     } catch (const std::exception& e) {
-        mMessage = "Cannot open " + path.substr(path.find_last_of('/') + 1) + ": " + e.what();
+        // Named as the user knows the file: a dropped file's place in the page's file system
+        // (/.glfw_dropped_files/...) means nothing to them.
+        const std::string name = path.substr(path.find_last_of('/') + 1);
+        std::string why = e.what();
+        for (std::size_t at; (at = why.find(path)) != std::string::npos;) why.replace(at, path.size(), name);
+        mMessage = "Cannot open " + name + ": " + why;
         std::fprintf(stderr, "riemesh: %s\n", mMessage.c_str());
         return false;
     }
@@ -622,7 +627,11 @@ void App::drawPanels()
     ImGui::SetNextWindowSizeConstraints(ImVec2(340, 0), ImVec2(340, tallest));
     ImGui::Begin("riemesh", nullptr, ImGuiWindowFlags_AlwaysAutoResize);
     ImGui::TextWrapped("%s", mVolumeName.c_str());
-    if (!mMessage.empty()) ImGui::TextColored(ImVec4(1.f, 0.45f, 0.35f, 1.f), "%s", mMessage.c_str());
+    if (!mMessage.empty()) {
+        ImGui::PushStyleColor(ImGuiCol_Text, ImVec4(1.f, 0.45f, 0.35f, 1.f));
+        ImGui::TextWrapped("%s", mMessage.c_str());
+        ImGui::PopStyleColor();
+    }
 
     // --- run controls
     if (ImGui::Button(mPlaying ? "Pause" : "Play", ImVec2(60, 0))) mPlaying = !mPlaying;
