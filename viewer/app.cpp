@@ -602,12 +602,18 @@ std::optional<std::string> App::takeDownload()
     return d;
 }
 
-void App::exportMesh(const char* extension)
+bool App::exportMesh(const std::string& extension)
 {
+    if (extension != ".ply" && extension != ".obj") return false;
+    // Named after the volume (phantom.nvdb: phantom.ply), or riemesh-mesh for the analytic phantom.
+    std::string stem = mVolume ? mVolumeName.substr(0, mVolumeName.find_last_of('.')) : std::string();
+    for (char& c : stem)
+        if (c == '/' || c == '\\' || c == '"') c = '_';
+    if (stem.empty()) stem = "riemesh-mesh";
 #ifdef __EMSCRIPTEN__
-    const std::string path = std::string("/tmp/riemesh-mesh") + extension;
+    const std::string path = "/tmp/" + stem + extension;
 #else
-    const std::string path = std::string("riemesh-mesh") + extension;
+    const std::string path = stem + extension;
 #endif
     try {
         writeMesh(path, mMesh, "riemesh viewer, " + mVolumeName);
@@ -616,6 +622,7 @@ void App::exportMesh(const char* extension)
     } catch (const std::exception& e) {
         mMessage = std::string("Cannot write the mesh: ") + e.what();
     }
+    return true;
 }
 
 void App::drawPanels()

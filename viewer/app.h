@@ -114,6 +114,9 @@ public:
     void setPlaying(bool playing) { mPlaying = playing; }
     /// Set when the page should download `downloadPath()` (web) / has written it (native).
     std::optional<std::string> takeDownload();
+    /// Writes the mesh as `extension` (".ply" or ".obj") for takeDownload(), named after the volume
+    /// (phantom.nvdb: phantom.ply); what the Files panel's buttons do. False for another extension.
+    bool exportMesh(const std::string& extension);
     const std::string& statusMessage() const { return mMessage; }
 
     /// The state as JSON (the page's JS API and tests): iteration, vertices, components, genus,
@@ -202,7 +205,6 @@ private:
     void drawPanels();
     void applyParameters(bool metricChanged);
     const char* stateName() const;
-    void exportMesh(const char* extension);
 };
 
 /// Seconds on a monotonic clock (performance.now() in the browser).

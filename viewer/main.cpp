@@ -260,6 +260,12 @@ EMSCRIPTEN_KEEPALIVE int riemesh_load(const char* path)
 {
     return gViewer && gViewer->app.loadVolume(path) ? 1 : 0;
 }
+/// Writes the mesh as ".ply" or ".obj" and hands it to the browser as a download (the next frame),
+/// as the Files panel's buttons do; 0 for another extension.
+EMSCRIPTEN_KEEPALIVE int riemesh_download(const char* extension)
+{
+    return gViewer && gViewer->app.exportMesh(extension) ? 1 : 0;
+}
 /// Draw cost of a whole frame as the main loop draws it while the camera moves (the scene, then the
 /// UI as it is drawn when it has not changed: composited from its layer), each render waited for as
 /// in riemesh_time_draw; mean milliseconds per frame (benchmarks only).

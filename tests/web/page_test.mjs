@@ -209,6 +209,20 @@ try {
   check('a dropped .nvdb is loaded and segmented', !!mineDone && mineState.volume === 'mine.nvdb' && mineState.components === 1,
         `${mine || 'not loaded'}; ${mineDone || 'no converged line'}`);
 
+  // Download (as the Files panel's button does, through the JS API): a PLY named after the volume
+  // whose header counts the model's vertices and faces.
+  const [download] = await Promise.all([page.waitForEvent('download', { timeout: 20000 }),
+                                        page.evaluate(() => window.riemesh.download('ply'))]);
+  const ply = fs.readFileSync(await download.path());
+  const header = ply.subarray(0, Math.max(0, ply.indexOf('end_header'))).toString('latin1');
+  const plyVertices = Number((/element vertex (\d+)/.exec(header) || [])[1]);
+  const plyFaces = Number((/element face (\d+)/.exec(header) || [])[1]);
+  const shown = await state();
+  check('the mesh downloads as a PLY named after the volume, with the model\'s vertices',
+        download.suggestedFilename() === 'mine.ply' && plyVertices === shown.vertices && 
+        plyFaces === 2 * shown.vertices - 4 * shown.components + 4 * shown.genus, // closed: F = 2 (V - chi)
+        `${download.suggestedFilename()}: ${ply.length} bytes, ${plyVertices} vertices, ${plyFaces} faces (model: ${shown.vertices} vertices, genus ${shown.genus})`);
+
   check('no page errors', pageErrors.length === 0, pageErrors.slice(0, 5).join(' | '));
 } catch (e) {
   check('the test ran', false, e.stack || String(e));
