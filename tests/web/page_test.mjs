@@ -219,7 +219,7 @@ try {
   const plyFaces = Number((/element face (\d+)/.exec(header) || [])[1]);
   const shown = await state();
   check('the mesh downloads as a PLY named after the volume, with the model\'s vertices',
-        download.suggestedFilename() === 'mine.ply' && plyVertices === shown.vertices && 
+        download.suggestedFilename() === 'mine.ply' && plyVertices === shown.vertices &&
         plyFaces === 2 * shown.vertices - 4 * shown.components + 4 * shown.genus, // closed: F = 2 (V - chi)
         `${download.suggestedFilename()}: ${ply.length} bytes, ${plyVertices} vertices, ${plyFaces} faces (model: ${shown.vertices} vertices, genus ${shown.genus})`);
 
