@@ -198,8 +198,13 @@ void frame()
     emscripten_get_element_css_size("#canvas", &cssW, &cssH);
     int winW = 0, winH = 0;
     glfwGetWindowSize(v.window, &winW, &winH);
+    // Not glfwSetWindowSize: emscripten 3.1.6's GLFW takes a size equal to the screen's for a
+    // fullscreen request, which the browser refuses without a click, and the canvas kept its old
+    // size (a browser in fullscreen mode, or a headless one whose screen is its window). Resizing
+    // the canvas is what it does for any other size: GLFW's resize listener then takes the new size
+    // as the window's and framebuffer's.
     if (int(cssW) > 0 && int(cssH) > 0 && (int(cssW) != winW || int(cssH) != winH))
-        glfwSetWindowSize(v.window, int(cssW), int(cssH));
+        EM_ASM({ Browser.setCanvasSize($0, $1); }, int(cssW), int(cssH));
 #endif
     glfwPollEvents();
     int width = 0, height = 0;

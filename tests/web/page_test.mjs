@@ -133,6 +133,20 @@ try {
         `mesh-coloured share of the view ${(100 * view.mesh).toFixed(1)}% -> ${(100 * cut.mesh).toFixed(1)}% cut -> ` +
         `${(100 * uncut.mesh).toFixed(1)}% uncut`);
 
+  // The canvas follows the window: a smaller window, then the first size again.
+  await page.setViewportSize({ width: 960, height: 600 });
+  await sleep(600);
+  const small = await page.evaluate(() => [Module.canvas.width, Module.canvas.height]);
+  const smallView = await analyse(context, await page.screenshot({ path: path.join(outDir, 'page-small.png') }),
+                                  { x: 360, y: 40, width: 580, height: 540 });
+  await page.setViewportSize({ width: 1280, height: 800 });
+  await sleep(600);
+  const large = await page.evaluate(() => [Module.canvas.width, Module.canvas.height]);
+  check('the canvas follows the window size, and the smaller view is drawn',
+        small[0] === 960 && small[1] === 600 && large[0] === 1280 && large[1] === 800 && smallView.mesh > 0.02,
+        `canvas ${small.join('x')} in a 960x600 window (mesh-coloured ${(100 * smallView.mesh).toFixed(1)}% of the view), ` +
+        `${large.join('x')} in 1280x800`);
+
   // Control: space pauses (keyboard through GLFW and ImGui into the app), reset restarts from the box,
   // space plays again.
   const state = () => page.evaluate(() => window.riemesh.state());
@@ -233,6 +247,6 @@ try {
   fs.rmSync(profile, { recursive: true, force: true });
 }
 const failed = results.filter((r) => !r.ok).length;
-console.log(`screenshots: ${outDir}/page.png, page-cut.png, page-evolving.png, page-head.png, page-drop.png`);
+console.log(`screenshots: ${outDir}/page.png, page-cut.png, page-small.png, page-evolving.png, page-head.png, page-drop.png`);
 console.log(`web: ${results.length - failed} passed, ${failed} failed`);
 process.exit(failed ? 1 : 0);
