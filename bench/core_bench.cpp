@@ -126,8 +126,8 @@ double now()
     return std::chrono::duration<double>(std::chrono::steady_clock::now().time_since_epoch()).count();
 }
 
-/// One size of the scaling table: a converged sphere of about `target` vertices that keeps
-/// evolving (never converges), with what its timed steps measured.
+/// One size of the scaling table: a sphere settled at about `target` vertices whose evolution never
+/// stops (every step a full iteration), with what its timed steps measured.
 struct ScalingCase {
     int target = 0;
     std::unique_ptr<FunctionImage> image;
