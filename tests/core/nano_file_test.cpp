@@ -175,7 +175,7 @@ TEST_CASE("nvdb reading: a child offset pointing anywhere but a node of the leve
     using RootData = nanovdb::NanoRoot<float>::DataType;
     const std::size_t tile0 = tree + offsets[3] + sizeof(RootData);
     const std::size_t childAt = tile0 + offsetof(RootData::Tile, child);
-    for (std::int64_t bad : {std::int64_t(8), std::int64_t(-4096), std::int64_t(1) << 40, std::int64_t(-1) << 40}) {
+    for (std::int64_t bad : {std::int64_t(8), std::int64_t(-4096), std::int64_t(1) << 40, -(std::int64_t(1) << 40)}) {
         Bytes f = good;
         std::int64_t child;
         std::memcpy(&child, f.data() + childAt, 8);

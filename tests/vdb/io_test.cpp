@@ -441,7 +441,7 @@ TEST_CASE("downsample: block averages keep the image's world placement and value
     CHECK(v.info().voxelSize == doctest::Approx(4.5));
     const riemesh::NanoVolume nano = v.nano();
     riemesh::NanoImage image(nano.imageGrid());
-    for (const riemesh::Vec3 x : {riemesh::Vec3(5, 3, 9), riemesh::Vec3(9.2, 8.1, 12.3)}) {
+    for (const riemesh::Vec3& x : {riemesh::Vec3(5, 3, 9), riemesh::Vec3(9.2, 8.1, 12.3)}) {
         double value;
         riemesh::Vec3 g;
         image.sample(x, value, g);
