@@ -52,7 +52,7 @@ private:
     unsigned mLayerProgram = 0, mLayerVao = 0, mLayerVbo = 0, mLayerFbo = 0, mLayerTexture = 0;
     int mLayerWidth = 0, mLayerHeight = 0;
     std::uint64_t mMeshVersion = ~0ull, mSliceVersion = ~0ull;
-    int mTriangleCount = 0, mSectionCount = 0; ///< vertices of the mesh's draw; of the section's lines
+    int mTriangleCount = 0, mSectionCount = 0; ///< vertices of the mesh's whole triangles; of the section's lines
     int mStraddleCount = 0; ///< vertices of the triangles across the cut, drawn after mTriangleCount
     float mMeanEdge = 0; ///< world units
     std::vector<MeshVertex> mVertices;    ///< the uploaded mesh's vertices
