@@ -1,8 +1,7 @@
 // vdb2mesh INPUT OUTPUT [options]: an adaptive mesh of an isosurface with the Taton-Lachaud deformable
 // model. Thin: parse and check everything, call riemesh::vdb and riemesh, report.
-#include "riemesh/evolution.h"
 #include "riemesh/mesh_io.h"
-#include "riemesh/self_intersection.h"
+#include "riemesh/vdb/pipeline.h"
 #include "riemesh/vdb/volume.h"
 
 #include "cli.h"
@@ -42,18 +41,6 @@ extern "C" void onSigint(int)
 {
     gInterrupted = 1;
     std::signal(SIGINT, SIG_DFL); // a second Ctrl-C kills at once
-}
-
-std::string jsonString(const std::string& s)
-{
-    std::string out = "\"";
-    for (char c : s) {
-        if (c == '"' || c == '\\') out += '\\', out += c;
-        else if (c == '\n') out += "\\n";
-        else if (static_cast<unsigned char>(c) < 0x20) out += ' ';
-        else out += c;
-    }
-    return out + "\"";
 }
 
 class ProgressBar {
@@ -114,11 +101,7 @@ int main(int argc, char** argv)
     // ---- Phase 1: everything that can be wrong with the input, before any long work (exit 1). ----
     Args args;
     vdb::Volume volume;
-    Mesh initMesh;
-    bool haveInitMesh = false;
-    std::vector<std::pair<Vec3, double>> spheres;
-    double iso = 0;
-    bool objectBrighter = true;
+    vdb::PipelineOptions options;
     std::string referencePath, referenceGrid = "sdf";
     double readSeconds = 0;
     try {
@@ -135,21 +118,22 @@ int main(int argc, char** argv)
         }
         if (!args.stats.empty()) apps::checkOutputPath(args.stats, {".json"}, "--stats");
 
-        if (args.init == "box") {
-        } else if (args.init.rfind("sphere:", 0) == 0) {
-            spheres = apps::parseSpheres(args.init.substr(7));
-        } else if (args.init.rfind("mesh:", 0) == 0) {
-            const std::string file = args.init.substr(5);
-            try {
-                initMesh = readMesh(file);
-            } catch (const std::exception& e) {
-                throw BadInput(std::string("--init mesh: ") + e.what());
-            }
-            if (initMesh.n_faces() == 0) throw BadInput("--init mesh: '" + file + "' has no faces");
-            haveInitMesh = true;
-        } else {
-            throw BadInput("--init: '" + args.init + "' is not box, sphere:X,Y,Z,R[;...] or mesh:FILE");
-        }
+        options.iso = args.iso;
+        options.riemannian = args.riemannian;
+        options.delta = args.delta;
+        options.zeta = args.zeta;
+        options.muMax = args.muMax;
+        options.sigma = args.sigma;
+        options.rho = args.rho;
+        options.tangentialGain = args.tangentialGain;
+        options.smooth = args.smooth;
+        options.maxIterations = args.maxIterations;
+        options.maxVertices = args.maxVertices;
+        options.openBorders = args.openBorders;
+        options.downsample = args.downsample;
+        options.threads = args.threads;
+        options.init = vdb::parseInitialSurface(args.init); // reads an --init mesh now, before the image
+        vdb::checkPipelineOptions(options);
 
         if (!args.reference.empty()) {
             referencePath = args.reference;
@@ -168,35 +152,14 @@ int main(int argc, char** argv)
         } catch (const std::exception& e) {
             throw BadInput(e.what());
         }
-        if (args.downsample > 1) volume.downsample(args.downsample);
         readSeconds = secondsSince(readStart);
-        const auto& info = volume.info();
-        if (args.iso) {
-            iso = *args.iso;
-        } else if (info.gridClass == "fog") {
-            iso = 0.5;
-        } else if (info.gridClass == "levelset") {
-            iso = 0.0;
-        } else {
-            std::ostringstream msg;
-            msg << "'" << args.input << "': image '" << info.gridName
-                << "' is neither a fog volume nor a level set: give --iso (its values range from " << info.minValue
-                << " to " << info.maxValue << ")";
-            throw BadInput(msg.str());
-        }
-        objectBrighter = info.gridClass != "levelset"; // level sets are negative inside
-        if (!(iso > info.minValue && iso < info.maxValue)) {
-            std::ostringstream msg;
-            msg << "--iso " << iso << " is outside the values of image '" << info.gridName << "' (" << info.minValue
-                << " to " << info.maxValue << "): there is no surface to extract";
-            throw BadInput(msg.str());
-        }
+        if (args.downsample == 1) vdb::pipelineIso(volume.info(), args.iso, args.input); // else checked after it
     } catch (const std::exception& e) {
         std::fprintf(stderr, "vdb2mesh: error: %s\n", oneLine(e.what()).c_str());
         return 1;
     }
 
-    // ---- Phase 2: the work (exit 2 on failure, 130 when interrupted). ----
+    // ---- Phase 2: the work (exit 2 on failure, 130 when interrupted; 1 for a limit reached). ----
     const bool tty = !args.quiet && ::isatty(STDERR_FILENO);
     const auto interrupted = [&]() {
         if (tty) std::fprintf(stderr, "\n");
@@ -204,71 +167,37 @@ int main(int argc, char** argv)
         return 130;
     };
     if (gInterrupted) return interrupted();
+    ProgressBar bar(tty, args.maxIterations);
     try {
-        auto threadLimit = vdb::limitThreads(args.threads);
-        const auto& info = volume.info();
-        const double h = info.voxelSize;
-
-        const auto metricStart = std::chrono::steady_clock::now();
-        if (tty) std::fprintf(stderr, "vdb2mesh: %s '%s' %dx%dx%d, metric...", info.format.c_str(),
-                              info.gridName.c_str(), info.dims[0], info.dims[1], info.dims[2]);
-        const std::uint64_t borderVoxels = args.openBorders ? 0 : volume.closeBorders(iso, objectBrighter);
-        vdb::VolumeMetricStats metricStats;
-        if (args.riemannian) {
-            // The tensor is computed on the image as read (its own sigma); the forces see it smoothed.
-            vdb::VolumeMetricOptions m;
-            m.sigma = args.sigma;
-            m.rho = args.rho;
-            m.muMax = args.muMax;
-            m.tangentialGain = args.tangentialGain;
-            metricStats = volume.computeMetric(m);
-        }
-        volume.smooth(args.smooth);
-        const NanoVolume nano = volume.nano();
-        const double metricSeconds = secondsSince(metricStart);
-        if (tty) std::fprintf(stderr, "\r%*s\r", 100, "");
-        if (gInterrupted) return interrupted();
-
-        if (!args.writeMetric.empty()) volume.writeMetric(args.writeMetric);
-        if (!args.exportNvdb.empty()) volume.exportNanoVDB(args.exportNvdb, iso);
-
-        NanoImage image(nano.imageGrid());
-        EuclideanMetric euclidean;
-        std::unique_ptr<NanoMetric> nanoMetric;
-        if (args.riemannian && nano.metricDiag())
-            nanoMetric = std::make_unique<NanoMetric>(nano.metricDiag(), nano.metricOff(), volume.metricMaxEigenvalue());
-        const MetricField& metric = nanoMetric ? static_cast<const MetricField&>(*nanoMetric) : euclidean;
-
-        EvolutionOptions opt;
-        opt.delta = args.delta * h;
-        opt.zeta = args.zeta;
-        opt.maxIterations = args.maxIterations;
-        opt.maxVertices = args.maxVertices;
-        opt.forces.iso = iso;
-        opt.forces.objectBrighter = objectBrighter;
-        ProgressBar bar(tty, args.maxIterations);
-        opt.progress = [&](const IterationStats& s) {
-            bar.update(s);
+        options.progress = [&](vdb::PipelineStage stage, const IterationStats* s) {
+            if (s) {
+                bar.update(*s);
+            } else if (stage == vdb::PipelineStage::Borders) {
+                const auto& info = volume.info();
+                if (tty) std::fprintf(stderr, "vdb2mesh: %s '%s' %dx%dx%d, metric...", info.format.c_str(),
+                                      info.gridName.c_str(), info.dims[0], info.dims[1], info.dims[2]);
+            } else if (stage == vdb::PipelineStage::Evolve) {
+                if (tty) std::fprintf(stderr, "\r%*s\r", 100, "");
+                if (gInterrupted) return false;
+                // The image the model fits and its metric, before the evolution (also when it fails).
+                if (!args.writeMetric.empty()) volume.writeMetric(args.writeMetric);
+                if (!args.exportNvdb.empty())
+                    volume.exportNanoVDB(args.exportNvdb, vdb::pipelineIso(volume.info(), args.iso, args.input).first);
+            }
             return gInterrupted == 0;
         };
-
-        const double initEdge = 0.5 * (1.0 + args.zeta) * opt.delta;
-        Mesh mesh = haveInitMesh ? std::move(initMesh)
-                    : spheres.empty() ? makeInitialBox(image, initEdge) : makeBubbles(spheres, initEdge);
-        if (haveInitMesh) prepareMesh(mesh);
-
-        const EvolutionStats evo = evolve(mesh, image, metric, opt);
-        bar.finish();
-        if (gInterrupted || evo.reason == StopReason::Interrupted) return interrupted();
-        if (evo.reason == StopReason::VertexCap) {
-            // A runaway mesh (delta too small for the image, or noise it keeps resolving): not a
-            // result worth writing. A limit the user set, so exit 1 like other parameters.
-            std::fprintf(stderr,
-                         "vdb2mesh: error: the mesh grew past the vertex cap of %llu vertices (--max-vertices) "
-                         "after %zu iterations; no output written (raise --delta or the cap)\n",
-                         static_cast<unsigned long long>(args.maxVertices), evo.iterations.size());
+        vdb::PipelineResult result;
+        try {
+            result = vdb::meshVolume(volume, options);
+        } catch (const vdb::PipelineInputError& e) {
+            bar.finish();
+            std::fprintf(stderr, "vdb2mesh: error: %s\n", oneLine(e.what()).c_str());
             return 1;
         }
+        bar.finish();
+        if (gInterrupted || result.stop == StopReason::Interrupted) return interrupted();
+        const Mesh& mesh = result.mesh;
+        const auto& info = result.image;
 
         const auto writeStart = std::chrono::steady_clock::now();
         if (vdb::fileExtension(args.output) == ".vdb") {
@@ -279,53 +208,22 @@ int main(int argc, char** argv)
                           info.transformNote);
         }
         const double writeSeconds = secondsSince(writeStart);
-        const MeshTopology topo = topologyOf(mesh);
-        const std::size_t selfIntersections = findSelfIntersections(mesh).count(); // 0 for an embedded surface
+        const MeshTopology& topo = result.topology;
+        const std::size_t selfIntersections = result.selfIntersections;
+        const EvolutionStats& evo = result.evolution;
         const double seconds = secondsSince(start);
 
-        std::optional<vdb::ReferenceError> ref;
-        if (!referencePath.empty()) ref = vdb::compareToReference(mesh, referencePath, referenceGrid);
+        vdb::PipelineRecord record;
+        record.input = args.input;
+        record.output = args.output;
+        record.readSeconds = readSeconds;
+        record.writeSeconds = writeSeconds;
+        record.totalSeconds = seconds;
+        if (!referencePath.empty()) record.reference = vdb::compareToReference(mesh, referencePath, referenceGrid);
+        const auto& ref = record.reference;
 
         if (!args.stats.empty()) {
-            std::ostringstream j;
-            j << std::setprecision(9);
-            j << "{\n  \"input\": " << jsonString(args.input) << ",\n  \"output\": " << jsonString(args.output)
-              << ",\n  \"image\": {\"grid\": " << jsonString(info.gridName) << ", \"class\": " << jsonString(info.gridClass)
-              << ", \"dims\": [" << info.dims[0] << ", " << info.dims[1] << ", " << info.dims[2]
-              << "], \"voxel_size\": " << h << ", \"world_space\": " << jsonString(info.transformNote) << "},\n"
-              << "  \"parameters\": {\"metric\": \"" << (args.riemannian ? "riemannian" : "euclidean")
-              << "\", \"iso\": " << iso << ", \"delta_voxels\": " << args.delta << ", \"zeta\": " << args.zeta
-              << ", \"mu_max\": " << args.muMax << ", \"edge_gain\": " << args.tangentialGain << ", \"sigma_voxels\": " << args.sigma << ", \"rho_voxels\": "
-              << args.rho << ", \"smooth_voxels\": " << args.smooth << ", \"max_iterations\": " << args.maxIterations
-              << ", \"init\": " << jsonString(args.init) << ", \"open_borders\": " << (args.openBorders ? "true" : "false")
-              << ", \"border_voxels_added\": " << borderVoxels << ", \"downsample\": " << args.downsample << "},\n";
-            if (args.riemannian)
-                j << "  \"metric\": {\"active_voxels\": " << metricStats.activeVoxels << ", \"total_voxels\": "
-                  << metricStats.totalVoxels << ", \"xi_ref\": " << metricStats.xiRef << ", \"threshold\": "
-                  << metricStats.threshold << "},\n";
-            j << "  \"iterations\": [";
-            for (std::size_t i = 0; i < evo.iterations.size(); ++i) {
-                const auto& s = evo.iterations[i];
-                j << (i ? ",\n    " : "\n    ") << "{\"iteration\": " << s.iteration << ", \"vertices\": " << s.vertices
-                  << ", \"mean_kinetic_energy\": " << s.meanKineticEnergy << ", \"splits\": " << s.splits
-                  << ", \"collapses\": " << s.collapses << ", \"flips\": " << s.flips << ", \"merges\": " << s.merges
-                  << ", \"cuts\": " << s.cuts << ", \"removed_components\": " << s.removedComponents
-                  << ", \"travelling\": " << s.moving << ", \"ms\": " << s.milliseconds << "}";
-            }
-            j << "\n  ],\n  \"summary\": {\"vertices\": " << topo.vertices << ", \"faces\": " << topo.faces
-              << ", \"components\": " << topo.components << ", \"genus\": " << topo.genus << ", \"euler\": " << topo.euler
-              << ", \"self_intersections\": " << selfIntersections
-              << ", \"iterations\": " << evo.iterations.size() << ", \"stop\": " << jsonString(toString(evo.reason))
-              << ", \"seconds\": " << seconds << ", \"read_seconds\": " << readSeconds << ", \"metric_seconds\": "
-              << metricSeconds << ", \"evolve_seconds\": " << evo.seconds << ", \"write_seconds\": " << writeSeconds
-              << ", \"splits\": " << evo.splits << ", \"collapses\": " << evo.collapses << ", \"flips\": " << evo.flips
-              << ", \"merges\": " << evo.merges << ", \"cuts\": " << evo.cuts << "}";
-            if (ref)
-                j << ",\n  \"reference\": {\"mean_voxels\": " << ref->mean / ref->voxelSize << ", \"max_vertex_voxels\": "
-                  << ref->maxVertex / ref->voxelSize << ", \"max_surface_voxels\": " << ref->maxSurface / ref->voxelSize
-                  << ", \"hausdorff_voxels\": " << ref->hausdorff / ref->voxelSize << "}";
-            j << "\n}\n";
-            const std::string text = j.str();
+            const std::string text = vdb::pipelineStatsJson(result, record);
             vdb::writeFileAtomically(args.stats, [&](const std::string& temp) {
                 std::ofstream out(temp, std::ios::binary);
                 out << text;
@@ -339,7 +237,7 @@ int main(int argc, char** argv)
                         "(%s), %.2f s (metric %.2f, evolve %.2f)",
                         args.output.c_str(), topo.vertices, topo.faces, topo.components, topo.components == 1 ? "" : "s",
                         topo.genus, selfIntersections, evo.iterations.size(), toString(evo.reason), seconds,
-                        metricSeconds, evo.seconds);
+                        result.seconds.metric, evo.seconds);
             if (ref)
                 std::printf("; vs reference: mean %.3f, Hausdorff %.3f voxels", ref->mean / ref->voxelSize,
                             ref->hausdorff / ref->voxelSize);
@@ -347,6 +245,7 @@ int main(int argc, char** argv)
         }
         return 0;
     } catch (const std::exception& e) {
+        bar.finish();
         std::fprintf(stderr, "vdb2mesh: error: %s\n", oneLine(e.what()).c_str());
         return 2;
     }

@@ -200,20 +200,11 @@ void checkOutputPath(const std::string& path, const std::vector<std::string>& ex
 
 std::vector<std::pair<Vec3, double>> parseSpheres(const std::string& spec)
 {
-    std::vector<std::pair<Vec3, double>> spheres;
-    std::stringstream all(spec);
-    std::string one;
-    while (std::getline(all, one, ';')) {
-        std::stringstream parts(one);
-        std::string t;
-        std::vector<double> v;
-        while (std::getline(parts, t, ',')) v.push_back(parseNumber("--init sphere", t));
-        if (v.size() != 4) throw BadInput("--init sphere: '" + one + "' is not X,Y,Z,R");
-        if (!(v[3] > 0)) throw BadInput("--init sphere: radius must be > 0 in '" + one + "'");
-        spheres.push_back({Vec3(v[0], v[1], v[2]), v[3]});
+    try {
+        return vdb::parseSpheres(spec);
+    } catch (const vdb::PipelineInputError& e) {
+        throw BadInput(e.what());
     }
-    if (spheres.empty()) throw BadInput("--init sphere: no sphere given");
-    return spheres;
 }
 
 } // namespace riemesh::apps

@@ -4,6 +4,7 @@
 #pragma once
 
 #include "riemesh/mesh.h"
+#include "riemesh/vdb/pipeline.h"
 
 #include <cstdint>
 #include <cstdio>
@@ -14,16 +15,16 @@
 
 namespace riemesh::apps {
 
-// Defaults (documented in --help).
-inline constexpr double kDelta = 3.0;      // voxels
-inline constexpr double kZeta = 2.5;
-inline constexpr double kMuMax = 9.0;
-inline constexpr double kSigma = 1.0;      // voxels
-inline constexpr double kRho = 2.0;        // voxels
-inline constexpr double kTangentialGain = 4.0;
-inline constexpr double kSmooth = 1.0;     // voxels
-inline constexpr int kMaxIterations = 3000;
-inline constexpr std::uint64_t kMaxVertices = 4'000'000;
+// Defaults (documented in --help): the pipeline's (riemesh/vdb/pipeline.h).
+using vdb::kDelta;
+using vdb::kMaxIterations;
+using vdb::kMaxVertices;
+using vdb::kMuMax;
+using vdb::kRho;
+using vdb::kSigma;
+using vdb::kSmooth;
+using vdb::kTangentialGain;
+using vdb::kZeta;
 
 struct Vdb2MeshArgs {
     bool help = false;                 ///< -h/--help: print usage, nothing else
