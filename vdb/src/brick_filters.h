@@ -46,7 +46,9 @@ struct BrickKernels {
     /// The metric of n voxels (metric_grid.h) from their tensor channels: for each voxel whose G
     /// differs from the identity, appends its index to `index` and G's six entries (xx yy zz xy xz
     /// yz) to `g` (room for n of each); returns how many.
-    std::size_t (*metricVoxels)(const float* const tensor[6], std::size_t n, const MetricParams& p, std::uint32_t* index, float* g);
+    /// With a `mask`, only voxels whose mask byte is non-zero are considered.
+    std::size_t (*metricVoxels)(const float* const tensor[6], std::size_t n, const std::uint8_t* mask, const MetricParams& p,
+                                std::uint32_t* index, float* g);
     /// The largest eigenvalue of J at the voxels index[0..n) into out.
     void (*largestEigenvalues)(const float* const tensor[6], const std::uint32_t* index, std::size_t n, float* out);
     const char* name; ///< "avx2" or "generic"

@@ -214,7 +214,8 @@ void tensorBlurX(const float* in, BlockDims d, const double* toWorld, const floa
     tensorProducts(in, d, toWorld, p);
     for (int c = 0; c < 6; ++c) blurX(p[c], BlockDims{gx, gy, gz}, w, r, out[c]);
 }
-std::size_t metricVoxels(const float* const J[6], std::size_t n, const MetricParams& p, std::uint32_t* index, float* g)
+std::size_t metricVoxels(const float* const J[6], std::size_t n, const std::uint8_t* mask, const MetricParams& p,
+                         std::uint32_t* index, float* g)
 {
     // Identity voxels (the vast majority far from contours) are skipped cheaply: xi_0 <= trace(J),
     // so trace(J) <= t * xi_ref means every mu_i = 1.
@@ -223,6 +224,7 @@ std::size_t metricVoxels(const float* const J[6], std::size_t n, const MetricPar
     auto mu = [&](double xi, double gain) { return 1.0 + p.span * std::clamp(gain * (xi * scale - offset), 0.0, 1.0); };
     std::size_t count = 0;
     for (std::size_t v = 0; v < n; ++v) {
+        if (mask && !mask[v]) continue;
         if (!(double(J[0][v]) + J[1][v] + J[2][v] > floorTrace)) continue;
         const double a[6] = {J[0][v], J[1][v], J[2][v], J[3][v], J[4][v], J[5][v]};
         SymmetricEigen3 e;

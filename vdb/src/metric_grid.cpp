@@ -27,6 +27,8 @@
 #include <cmath>
 #include <limits>
 #include <memory>
+#include <optional>
+#include <utility>
 #include <stdexcept>
 
 namespace riemesh::vdb {
@@ -38,7 +40,9 @@ using detail::BlockDims;
 using FloatLeaf = openvdb::FloatTree::LeafNodeType;
 using Vec3fLeaf = openvdb::Vec3fTree::LeafNodeType;
 
-constexpr int kBrick = 48; ///< target brick edge in voxels (bricks are whole leaves, about this long)
+/// Brick edges tried, voxels (bricks are whole leaves, about this long): large bricks for dense data
+/// (less halo per voxel), small ones for thin shells such as a level set's narrow band.
+constexpr int kBrickSizes[] = {16, 24, 32, 48};
 constexpr int kLeafDim = int(FloatLeaf::DIM);
 static_assert(kLeafDim == 8, "leaf coordinates are shifted by 3");
 
@@ -50,16 +54,16 @@ struct Brick {
     Coord cell; ///< segment index along each axis
 };
 
-/// The clip box cut along each axis into segments of whole leaves, about kBrick voxels each and of
+/// The clip box cut along each axis into segments of whole leaves, about `brick` voxels each and of
 /// equal length (no thin leftover brick at the far side, where the halo would cost the most).
 class BrickLattice {
 public:
-    explicit BrickLattice(const CoordBBox& clip) : mClip(clip)
+    BrickLattice(const CoordBBox& clip, int brick) : mClip(clip)
     {
         for (int a = 0; a < 3; ++a) {
             mFirstLeaf[a] = floorTo(clip.min()[a], kLeafDim);
             const int leaves = (clip.max()[a] - mFirstLeaf[a]) / kLeafDim + 1;
-            const int segments = std::max(1, int(std::lround(double(leaves) * kLeafDim / kBrick)));
+            const int segments = std::max(1, int(std::lround(double(leaves) * kLeafDim / brick)));
             mSegmentOfLeaf[a].resize(std::size_t(leaves));
             for (int s = 0; s < segments; ++s) {
                 const int l0 = int(std::int64_t(s) * leaves / segments), l1 = int(std::int64_t(s + 1) * leaves / segments);
@@ -89,12 +93,12 @@ private:
     std::vector<int> mSegmentOfLeaf[3];
 };
 
-/// The bricks of the lattice over `clip` with a voxel within `reach` voxels of a leaf node of
-/// `tree`, sorted, so that the order (and every result assembled in it) is the same on any run.
+/// The bricks of `lattice` with a voxel within `reach` voxels of a leaf node of `tree`, sorted, so
+/// that the order (and every result assembled in it) is the same on any run.
 template<typename TreeT>
-std::vector<Brick> bricksNearLeaves(const TreeT& tree, int reach, const CoordBBox& clip)
+std::vector<Brick> bricksNearLeaves(const TreeT& tree, int reach, const BrickLattice& lattice)
 {
-    const BrickLattice lattice(clip);
+    const CoordBBox& clip = lattice.clip();
     std::vector<Coord> cells;
     for (auto it = tree.cbeginLeaf(); it; ++it) {
         CoordBBox box(it->origin().offsetBy(-reach), it->origin().offsetBy(kLeafDim - 1 + reach));
@@ -117,6 +121,29 @@ std::vector<Brick> bricksNearLeaves(const TreeT& tree, int reach, const CoordBBo
     bricks.reserve(cells.size());
     for (const Coord& c : cells) bricks.push_back(lattice.brick(c));
     return bricks;
+}
+
+/// The brick lattice over `clip` whose bricks near the leaves of `tree` gather the fewest voxels
+/// with a halo of `halo` (the filters' work is about proportional to that), and those bricks.
+template<typename TreeT>
+std::pair<BrickLattice, std::vector<Brick>> cheapestBricks(const TreeT& tree, int reach, int halo, const CoordBBox& clip)
+{
+    std::optional<std::pair<BrickLattice, std::vector<Brick>>> best;
+    double bestCost = 0;
+    for (const int size : kBrickSizes) {
+        BrickLattice lattice(clip, size);
+        std::vector<Brick> bricks = bricksNearLeaves(tree, reach, lattice);
+        double cost = 0;
+        for (const Brick& b : bricks) {
+            const Coord d = b.region.dim();
+            cost += double(d.x() + 2 * halo) * (d.y() + 2 * halo) * (d.z() + 2 * halo);
+        }
+        if (!best || cost < bestCost) {
+            bestCost = cost;
+            best.emplace(std::move(lattice), std::move(bricks));
+        }
+    }
+    return std::move(*best);
 }
 
 /// The values of `tree` over `box` into `out` (x fastest), reading coordinates outside `clamp` at
@@ -205,6 +232,7 @@ struct BrickScratch {
     std::array<std::vector<float>, 6> channel; ///< Jxx Jyy Jzz Jxy Jxz Jyz over the brick, x fastest
     std::vector<std::uint32_t> index;          ///< voxels of the brick (x fastest) picked by a pass
     std::vector<float> values;
+    std::vector<std::uint8_t> mask;
 };
 
 /// The structure tensor J of the image over a brick's region (world space) into s.channel, x fastest
@@ -348,7 +376,7 @@ openvdb::FloatGrid::Ptr gaussianSmooth(const openvdb::FloatGrid& image, double s
     // far as the kernel reaches, e.g. into the corners between the caps of closeBorders). Constant
     // active tiles keep their value (exact inside; at their border only where they meet different
     // values, which leaf nodes hold).
-    const std::vector<Brick> bricks = bricksNearLeaves(image.tree(), r, box);
+    const auto [lattice, bricks] = cheapestBricks(image.tree(), r, r, box);
     std::vector<BrickLeaves<FloatLeaf>> added(bricks.size());
     tbb::enumerable_thread_specific<BrickScratch> scratch;
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, bricks.size(), 1), [&](const tbb::blocked_range<std::size_t>& rg) {
@@ -404,7 +432,7 @@ StructureTensorGrids structureTensor(const openvdb::FloatGrid& image, const Stru
     initialize();
     const CoordBBox box = activeBox(image);
     const TensorBricks tensor(image, options, box);
-    const std::vector<Brick> bricks = bricksNearLeaves(image.tree(), tensor.halo(), box);
+    const auto [lattice, bricks] = cheapestBricks(image.tree(), tensor.halo(), tensor.halo(), box);
     std::vector<BrickLeaves<Vec3fLeaf>> diag(bricks.size()), off(bricks.size());
     tbb::enumerable_thread_specific<BrickScratch> scratch;
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, bricks.size(), 1), [&](const tbb::blocked_range<std::size_t>& rg) {
@@ -452,9 +480,11 @@ MetricGrids computeMetric(const openvdb::FloatGrid& image, const StructureTensor
     if (opt.muMax == 1.0) return out; // Euclidean request: G = I
 
     const TensorBricks tensor(image, tensorOptions, box);
-    const std::vector<Brick> bricks = bricksNearLeaves(image.tree(), tensor.halo(), box);
-    tbb::enumerable_thread_specific<BrickScratch> scratch;
+    // A level set's metric lives in its narrow band (the active voxels: where its surface can be);
+    // other images' wherever the filters reach from their leaf nodes.
     const bool levelSet = image.getGridClass() == openvdb::GRID_LEVEL_SET;
+    const auto [lattice, bricks] = cheapestBricks(image.tree(), levelSet ? 0 : tensor.halo(), tensor.halo(), box);
+    tbb::enumerable_thread_specific<BrickScratch> scratch;
 
     // The tensor of the bricks pass 1 computed, kept for pass 2 when the image is small.
     std::vector<std::array<std::vector<float>, 6>> kept;
@@ -473,7 +503,6 @@ MetricGrids computeMetric(const openvdb::FloatGrid& image, const StructureTensor
         constexpr double kSamples = 5e5;
         constexpr std::size_t kSmall = 27; // bricks: up to 27 * 48^3 voxels, 72 MB of tensor kept
         const bool all = bricks.size() <= kSmall;
-        const BrickLattice lattice(box);
         std::vector<std::size_t> pass1;
         for (std::size_t b = 0; b < bricks.size(); ++b) {
             const Coord& c = bricks[b].cell;
@@ -575,7 +604,24 @@ MetricGrids computeMetric(const openvdb::FloatGrid& image, const StructureTensor
             s.values.resize(6 * n);
             const float* J[6];
             for (int c = 0; c < 6; ++c) J[c] = s.channel[c].data();
-            const std::size_t count = detail::brickKernels().metricVoxels(J, n, params, s.index.data(), s.values.data());
+            const std::uint8_t* mask = nullptr;
+            if (levelSet) {
+                s.mask.assign(n, 0);
+                const Coord first(floorTo(region.min().x(), kLeafDim), floorTo(region.min().y(), kLeafDim), floorTo(region.min().z(), kLeafDim));
+                for (int lz = first.z(); lz <= region.max().z(); lz += kLeafDim)
+                    for (int ly = first.y(); ly <= region.max().y(); ly += kLeafDim)
+                        for (int lx = first.x(); lx <= region.max().x(); lx += kLeafDim) {
+                            const FloatLeaf* leaf = image.tree().probeConstLeaf(Coord(lx, ly, lz));
+                            if (!leaf) continue;
+                            for (auto it = leaf->cbeginValueOn(); it; ++it) {
+                                const Coord rel = it.getCoord() - region.min();
+                                if (region.isInside(it.getCoord()))
+                                    s.mask[(std::size_t(rel.z()) * d.y() + rel.y()) * d.x() + rel.x()] = 1;
+                            }
+                        }
+                mask = s.mask.data();
+            }
+            const std::size_t count = detail::brickKernels().metricVoxels(J, n, mask, params, s.index.data(), s.values.data());
             for (std::size_t i = 0; i < count; ++i) {
                 const std::uint32_t v = s.index[i];
                 const std::uint32_t dx = std::uint32_t(d.x()), dy = std::uint32_t(d.y());

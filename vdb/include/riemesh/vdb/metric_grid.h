@@ -15,7 +15,8 @@
 // the filters' reach of any leaf node (empty space, inside constant tiles) have J = 0 and count as
 // zeros without being visited. When the object is too small for the box's top percentile, xi_ref
 // is taken over the voxels the filters reach instead. A level set (grid class) is a signed distance
-// in world units, |grad| = 1 in its band: xi_ref = 1 and t = threshold (no noise to measure).
+// in world units, |grad| = 1 in its band: xi_ref = 1 and t = threshold (no noise to measure), and its
+// metric is kept to its narrow band (its active voxels), where its surface lies.
 // Then a flat contour gets muMax along its normal and 1 along its tangents (coarse along it, Table 1),
 // a sharp edge also along its curvature direction, a corner in all three.
 //
