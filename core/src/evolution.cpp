@@ -45,9 +45,20 @@ void validate(const EvolutionOptions& o)
 } // namespace
 
 Evolution::Evolution(Mesh& mesh, const ScalarImage& image, const MetricField& metric, const EvolutionOptions& options)
-    : mMesh(mesh), mImage(image), mMetric(metric), mOptions(options)
+    : Evolution(mesh, std::vector<EvolutionLevel>{{&image, 1.0}}, metric, options)
+{
+}
+
+Evolution::Evolution(Mesh& mesh, std::vector<EvolutionLevel> levels, const MetricField& metric, const EvolutionOptions& options)
+    : mMesh(mesh), mLevels(std::move(levels)), mMetric(metric), mOptions(options)
 {
     validate(mOptions);
+    if (mLevels.empty()) throw std::invalid_argument("evolution: no level");
+    for (const auto& l : mLevels)
+        if (!l.image || !(l.scale >= 1.0) || !std::isfinite(l.scale))
+            throw std::invalid_argument("evolution: every level needs an image and a scale >= 1");
+    if (mOptions.coarseConvergenceWindow < 1 || mOptions.coarseMaxIterations < 1)
+        throw std::invalid_argument("evolution: bad coarse-level limits");
     prepareMesh(mMesh);
     mChurn = mMesh.n_vertices(); // a given mesh's numbering is unknown: renumbered at the first step
     OpenMesh::VPropHandleT<char> mergeZone; // zones left by an earlier run count down from the start
@@ -62,6 +73,13 @@ void Evolution::setOptions(const EvolutionOptions& options)
     mLastTopologyEvent = int(mHistory.size());
 }
 
+EvolutionOptions Evolution::levelOptions() const
+{
+    EvolutionOptions o = mOptions;
+    o.delta *= mLevels[mLevel].scale;
+    return o;
+}
+
 IterationStats Evolution::step()
 {
     IterationStats it;
@@ -73,7 +91,8 @@ IterationStats Evolution::step()
         ms = std::chrono::duration<double, std::milli>(t - lap).count();
         lap = t;
     };
-    const EvolutionOptions& o = mOptions;
+    const EvolutionOptions o = levelOptions();
+    const ScalarImage& image = *mLevels[mLevel].image;
     const double vmax = o.vmaxFraction * o.delta;
 
     // G at every vertex once per position: the samples taken after the last integration serve the
@@ -87,7 +106,7 @@ IterationStats Evolution::step()
     // the faces would fly faster than vmax / sqrt 2 (never with the defaults: 0.25 vs 0.35 delta).
     ForceOptions forces = o.forces;
     if (o.damping > 0) forces.externalLimit = std::min(forces.externalLimit, kCreaseRoom * o.damping * vmax / o.delta);
-    computeForces(mMesh, mImage, forces, o.delta, mForces, &mMetric);
+    computeForces(mMesh, image, forces, o.delta, mForces, &mMetric);
     phase(it.phases.forces);
     IntegrationOptions io;
     io.mass = o.mass;
@@ -101,6 +120,11 @@ IterationStats Evolution::step()
     RegularityOptions ro;
     ro.delta = o.delta;
     ro.zeta = o.zeta;
+    if (mLevel > 0 && int(mHistory.size()) - mLevelStart < o.levelSettleIterations) {
+        const double c = std::min(o.levelSettleFactor, 0.5 * o.zeta); // halves of a split edge stay >= c delta
+        ro.delta = c * o.delta;
+        ro.zeta = o.zeta / c;
+    }
     const RegularityStats rs = enforceRegularity(mMesh, mMetric, ro);
     phase(it.phases.regularity);
 
@@ -172,6 +196,7 @@ IterationStats Evolution::step()
     }
 
     it.iteration = iteration;
+    it.level = level();
     it.removedComponents = removed;
     it.vertices = live;
     it.meanKineticEnergy = is.meanKineticEnergy;
@@ -193,13 +218,29 @@ IterationStats Evolution::step()
 
 void Evolution::updateConvergence()
 {
-    const EvolutionOptions& o = mOptions;
-    const int n = int(mHistory.size());
+    const EvolutionOptions o = levelOptions();
+    const int total = int(mHistory.size());
     // The live count (n_vertices() also counts deleted vertices not yet compacted away).
-    if (n > 0 && mHistory[n - 1].vertices > o.maxVertices) { mReason = StopReason::VertexCap; return; }
-    if (n >= o.maxIterations) { mReason = StopReason::IterationCap; return; }
-    const int w = o.convergenceWindow;
-    if (n < std::max(o.minIterations, 2 * w)) return;
+    if (total > 0 && mHistory[total - 1].vertices > o.maxVertices) { mReason = StopReason::VertexCap; return; }
+    if (total >= o.maxIterations) { mReason = StopReason::IterationCap; return; }
+    const bool coarse = mLevel + 1 < int(mLevels.size());
+    const int inLevel = total - mLevelStart;
+    const int w = coarse ? o.coarseConvergenceWindow : o.convergenceWindow;
+    const int minimum = coarse ? 2 * w : std::max(o.minIterations, 2 * w);
+    const bool converged = inLevel >= minimum && settled(o, w);
+    if (!coarse) {
+        if (converged) mReason = StopReason::Converged;
+        return;
+    }
+    if (converged || inLevel >= o.coarseMaxIterations) {
+        ++mLevel; // the next, finer level starts from this surface
+        mLevelStart = total;
+    }
+}
+
+bool Evolution::settled(const EvolutionOptions& o, int w) const
+{
+    const int n = int(mHistory.size());
     const double scale = o.delta * o.delta;
     // Mean and spread of the relative kinetic energy (KE / delta^2) over the last two windows.
     double recent = 0, previous = 0, peak = 0;
@@ -214,8 +255,8 @@ void Evolution::updateConvergence()
     // mesh at rest elsewhere): not converged. Travelling is judged on the drift, which noise jitter
     // does not build up.
     for (int i = n - w; i < n; ++i)
-        if (double(mHistory[i].moving) > o.movingFraction * double(mHistory[i].vertices)) return;
-    if (peak < o.energyThreshold) { mReason = StopReason::Converged; return; }
+        if (double(mHistory[i].moving) > o.movingFraction * double(mHistory[i].vertices)) return false;
+    if (peak < o.energyThreshold) return true;
     // Stabilised: low energy (well below free-flight speed), no topology change and a nearly constant
     // vertex count over the last window, and energy no longer decreasing.
     const double moving = 0.5 * std::pow(0.1 * o.vmaxFraction, 2); // mean speed < 10% of vmax
@@ -223,13 +264,19 @@ void Evolution::updateConvergence()
     const double dv = std::abs(double(mHistory[n - 1].vertices) - double(mHistory[n - w].vertices));
     const bool steadyCount = dv <= 0.01 * double(mHistory[n - 1].vertices);
     const bool flat = std::abs(recent - previous) <= o.relativeChange * std::max(previous, 1e-30) || recent > previous;
-    if (quiet && steadyCount && flat) mReason = StopReason::Converged;
+    return quiet && steadyCount && flat;
 }
 
 EvolutionStats evolve(Mesh& mesh, const ScalarImage& image, const MetricField& metric, const EvolutionOptions& options)
 {
+    return evolve(mesh, std::vector<EvolutionLevel>{{&image, 1.0}}, metric, options);
+}
+
+EvolutionStats evolve(Mesh& mesh, const std::vector<EvolutionLevel>& levels, const MetricField& metric,
+                      const EvolutionOptions& options)
+{
     const auto start = std::chrono::steady_clock::now();
-    Evolution evolution(mesh, image, metric, options);
+    Evolution evolution(mesh, levels, metric, options);
     while (!evolution.done()) evolution.step();
     EvolutionStats stats;
     stats.iterations = evolution.history();

@@ -149,11 +149,20 @@ static double gershgorinBound(const nanovdb::Vec3fGrid* diag, const nanovdb::Vec
 void NanoVolume::index()
 {
     mImage = mDiag = mOff = mIsoGrid = -1;
+    mLevels.clear();
+    std::vector<std::pair<int, int>> levels; // (level, handle)
     for (int i = 0; i < int(mHandles.size()); ++i) {
         const auto* meta = mHandles[i].gridMetaData();
         if (!meta) continue;
         const std::string name = meta->shortGridName();
-        if (name == kMetricDiagGrid) {
+        const std::string prefix = kLevelGridPrefix;
+        if (name.compare(0, prefix.size(), prefix) == 0) {
+            const std::string digits = name.substr(prefix.size());
+            if (digits.empty() || digits.size() > 2 || digits.find_first_not_of("0123456789") != std::string::npos)
+                throw std::runtime_error("nvdb: grid '" + name + "' is not a level (" + prefix + "1, 2, ...)");
+            if (!mHandles[i].grid<float>()) throw std::runtime_error("nvdb: level grid '" + name + "' is not a float grid");
+            levels.emplace_back(std::stoi(digits), i);
+        } else if (name == kMetricDiagGrid) {
             if (!mHandles[i].grid<nanovdb::Vec3f>())
                 throw std::runtime_error("nvdb: grid 'metric_diag' is not a Vec3f grid");
             mDiag = i;
@@ -172,6 +181,12 @@ void NanoVolume::index()
         }
     }
     if (mImage < 0) throw std::runtime_error("nvdb: the file holds no float grid to segment");
+    std::sort(levels.begin(), levels.end());
+    for (std::size_t k = 0; k < levels.size(); ++k) {
+        if (levels[k].first != int(k) + 1)
+            throw std::runtime_error("nvdb: the level grids are not numbered 1, 2, ... without a gap");
+        mLevels.push_back(levels[k].second);
+    }
     if ((mDiag < 0) != (mOff < 0))
         throw std::runtime_error("nvdb: the metric needs both 'metric_diag' and 'metric_off' grids");
     mMuMax = (mDiag >= 0) ? gershgorinBound(metricDiag(), metricOff()) : 1.0;
@@ -276,6 +291,10 @@ double NanoVolume::iso() const
 const nanovdb::FloatGrid* NanoVolume::imageGrid() const
 {
     return mImage >= 0 ? mHandles[mImage].grid<float>() : nullptr;
+}
+const nanovdb::FloatGrid* NanoVolume::levelGrid(int level) const
+{
+    return level >= 1 && level <= int(mLevels.size()) ? mHandles[mLevels[level - 1]].grid<float>() : nullptr;
 }
 const nanovdb::Vec3fGrid* NanoVolume::metricDiag() const
 {

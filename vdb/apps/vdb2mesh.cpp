@@ -131,6 +131,7 @@ int main(int argc, char** argv)
         options.maxVertices = args.maxVertices;
         options.openBorders = args.openBorders;
         options.downsample = args.downsample;
+        options.levels = args.levels;
         options.threads = args.threads;
         options.init = vdb::parseInitialSurface(args.init); // reads an --init mesh now, before the image
         vdb::checkPipelineOptions(options);

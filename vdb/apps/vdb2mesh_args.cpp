@@ -50,6 +50,10 @@ void printVdb2MeshUsage(std::FILE* out)
         "  --max-iterations N   iteration cap (default %d)\n"
         "  --max-vertices N     vertex cap: a mesh growing past N vertices stops the run with an error\n"
         "                       and no output (default %llu)\n"
+        "  --levels L           coarse-to-fine: converge first with delta x 2^L on 2^L-voxel blocks of the\n"
+        "                       image (their maxima, grown by a block: the object's thin parts kept),\n"
+        "                       then halve down to the image itself; auto (default) leaves the coarsest\n"
+        "                       level about 16 edges across the image; 0 = the image only\n"
         "  --init I             box (default: the image box inset by a voxel, deflating)\n"
         "                       sphere:X,Y,Z,R[;X,Y,Z,R...]  bubbles, world units, inflating\n"
         "                       mesh:FILE  a closed mesh (.obj .ply .off .stl), world units\n"
@@ -168,6 +172,10 @@ Vdb2MeshArgs parseVdb2MeshArgs(int argc, const char* const* argv)
         else if (f == "-q" || f == "--quiet") a.quiet = true;
         else if (f == "--open-borders") a.openBorders = true;
         else if (f == "--downsample") a.downsample = int(parseCount(f, value(), 1, 64));
+        else if (f == "--levels") {
+            const std::string v = value();
+            a.levels = v == "auto" ? -1 : int(parseCount(f, v, 0, 12));
+        }
         else if (f.size() > 1 && f[0] == '-') throw BadInput("unknown option '" + f + "' (see --help)");
         else positional.push_back(f);
     }

@@ -276,7 +276,8 @@ nanovdb::GridHandle<nanovdb::HostBuffer> toNano(const openvdb::Vec3fGrid& grid)
 }
 
 std::vector<nanovdb::GridHandle<nanovdb::HostBuffer>>
-toNanoHandles(const openvdb::FloatGrid& image, const openvdb::Vec3fGrid* metricDiag, const openvdb::Vec3fGrid* metricOff)
+toNanoHandles(const openvdb::FloatGrid& image, const openvdb::Vec3fGrid* metricDiag, const openvdb::Vec3fGrid* metricOff,
+              const FloatGrids& levels)
 {
     if (bool(metricDiag) != bool(metricOff))
         throw std::invalid_argument("toNanoHandles: give both metric grids or neither");
@@ -286,19 +287,20 @@ toNanoHandles(const openvdb::FloatGrid& image, const openvdb::Vec3fGrid* metricD
         handles.push_back(toNano(*metricDiag));
         handles.push_back(toNano(*metricOff));
     }
+    for (const auto& level : levels) handles.push_back(toNano(*level));
     return handles;
 }
 
 NanoVolume toNanoVolume(const openvdb::FloatGrid& image, const openvdb::Vec3fGrid* metricDiag,
-                        const openvdb::Vec3fGrid* metricOff)
+                        const openvdb::Vec3fGrid* metricOff, const FloatGrids& levels)
 {
-    return NanoVolume::fromHandles(toNanoHandles(image, metricDiag, metricOff));
+    return NanoVolume::fromHandles(toNanoHandles(image, metricDiag, metricOff, levels));
 }
 
 void writeNvdb(const std::string& path, const openvdb::FloatGrid& image, const openvdb::Vec3fGrid* metricDiag,
-               const openvdb::Vec3fGrid* metricOff, double iso)
+               const openvdb::Vec3fGrid* metricOff, double iso, const FloatGrids& levels)
 {
-    auto handles = toNanoHandles(image, metricDiag, metricOff);
+    auto handles = toNanoHandles(image, metricDiag, metricOff, levels);
     if (std::isfinite(iso)) {
         openvdb::FloatGrid isoGrid{float(iso)};
         isoGrid.setName(riemesh::kIsoGrid);

@@ -642,3 +642,131 @@ MetricGrids computeMetric(const openvdb::FloatGrid& image, const StructureTensor
 }
 
 } // namespace riemesh::vdb
+
+namespace riemesh::vdb {
+namespace {
+
+int floorDiv(int a, int b) { return a >= 0 ? a / b : -((-a + b - 1) / b); }
+int ceilDiv(int a, int b) { return -floorDiv(-a, b); }
+
+/// out(C) = the largest (or smallest) value of `in` over in[stride C + offset + k], k in [0, window)
+/// along every axis: block extremes (stride = window) or a dilation (stride 1, window 3, offset -1).
+/// Sparse: leaf nodes near the input's leaves are computed by bricks, constant tiles map to tiles.
+openvdb::FloatGrid::Ptr windowExtreme(const openvdb::FloatGrid& in, int stride, int window, int offset, bool maximum)
+{
+    auto out = openvdb::FloatGrid::create(in.background());
+    out->setName(in.getName());
+    out->setGridClass(in.getGridClass());
+    auto xform = in.transform().copy();
+    // Output index C sits at the centre of its window in the input's index space.
+    xform->preTranslate(openvdb::Vec3d(offset + 0.5 * (window - 1)));
+    xform->preScale(double(stride));
+    out->setTransform(xform);
+    const CoordBBox box = activeBox(in);
+    CoordBBox clip;
+    for (int a = 0; a < 3; ++a) {
+        clip.min()[a] = ceilDiv(box.min()[a] - offset - window + 1, stride);
+        clip.max()[a] = floorDiv(box.max()[a] - offset, stride);
+    }
+    // Tiles (active or not) first: the leaf nodes computed below replace them where they overlap.
+    {
+        auto it = in.tree().cbeginValueAll();
+        it.setMaxDepth(openvdb::FloatTree::DEPTH - 2);
+        for (; it; ++it) {
+            // Empty space (inactive background) is the output's background already.
+            if (!it.isTileValue() || (!it.isValueOn() && *it == in.background())) continue;
+            CoordBBox t;
+            it.getBoundingBox(t);
+            CoordBBox o(Coord(floorDiv(t.min().x() - offset, stride), floorDiv(t.min().y() - offset, stride), floorDiv(t.min().z() - offset, stride)),
+                        Coord(floorDiv(t.max().x() - offset, stride), floorDiv(t.max().y() - offset, stride), floorDiv(t.max().z() - offset, stride)));
+            out->tree().fill(o, *it, it.isValueOn());
+        }
+    }
+    // Bricks of the output whose windows meet an input leaf node.
+    std::vector<CoordBBox> reach;
+    for (auto it = in.tree().cbeginLeaf(); it; ++it) {
+        const Coord o = it->origin();
+        CoordBBox r;
+        for (int a = 0; a < 3; ++a) {
+            r.min()[a] = ceilDiv(o[a] - offset - window + 1, stride);
+            r.max()[a] = floorDiv(o[a] + kLeafDim - 1 - offset, stride);
+        }
+        reach.push_back(r);
+    }
+    const BrickLattice lattice(clip, kBrickSizes[std::size(kBrickSizes) - 1]);
+    std::vector<Coord> cells;
+    for (CoordBBox r : reach) {
+        r.intersect(clip);
+        if (r.empty()) continue;
+        for (int z = lattice.segment(2, r.min().z()); z <= lattice.segment(2, r.max().z()); ++z)
+            for (int y = lattice.segment(1, r.min().y()); y <= lattice.segment(1, r.max().y()); ++y)
+                for (int x = lattice.segment(0, r.min().x()); x <= lattice.segment(0, r.max().x()); ++x) cells.emplace_back(x, y, z);
+    }
+    std::sort(cells.begin(), cells.end(), [](const Coord& a, const Coord& b) {
+        return a.z() != b.z() ? a.z() < b.z() : a.y() != b.y() ? a.y() < b.y() : a.x() < b.x();
+    });
+    cells.erase(std::unique(cells.begin(), cells.end()), cells.end());
+    std::vector<BrickLeaves<FloatLeaf>> leaves(cells.size());
+    const auto better = [maximum](float a, float b) { return maximum ? std::max(a, b) : std::min(a, b); };
+    tbb::enumerable_thread_specific<BrickScratch> scratch;
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, cells.size(), 1), [&](const tbb::blocked_range<std::size_t>& rg) {
+        BrickScratch& s = scratch.local();
+        for (std::size_t b = rg.begin(); b != rg.end(); ++b) {
+            const CoordBBox region = lattice.brick(cells[b]).region;
+            const Coord d = region.dim();
+            const auto scaled = [stride](const Coord& c, int add) { return Coord(c.x() * stride + add, c.y() * stride + add, c.z() * stride + add); };
+            const CoordBBox src(scaled(region.min(), offset), scaled(region.max(), offset + window - 1));
+            const Coord e = src.dim();
+            s.block.resize(std::size_t(e.x()) * e.y() * e.z());
+            gather(in.tree(), src, box, s.block.data());
+            // x, then y, then z: each pass keeps the extreme of `window` values every `stride`.
+            s.scratch.resize(std::size_t(d.x()) * e.y() * e.z());
+            for (std::size_t row = 0; row < std::size_t(e.y()) * e.z(); ++row)
+                for (int c = 0; c < d.x(); ++c) {
+                    const float* p = &s.block[row * e.x() + std::size_t(c) * stride];
+                    float v = p[0];
+                    for (int k = 1; k < window; ++k) v = better(v, p[k]);
+                    s.scratch[row * d.x() + c] = v;
+                }
+            s.block.resize(std::size_t(d.x()) * d.y() * e.z());
+            for (int z = 0; z < e.z(); ++z)
+                for (int c = 0; c < d.y(); ++c)
+                    for (int x = 0; x < d.x(); ++x) {
+                        float v = s.scratch[(std::size_t(z) * e.y() + std::size_t(c) * stride) * d.x() + x];
+                        for (int k = 1; k < window; ++k)
+                            v = better(v, s.scratch[(std::size_t(z) * e.y() + std::size_t(c) * stride + k) * d.x() + x]);
+                        s.block[(std::size_t(z) * d.y() + c) * d.x() + x] = v;
+                    }
+            for (int c = 0; c < d.z(); ++c)
+                for (int y = 0; y < d.y(); ++y)
+                    for (int x = 0; x < d.x(); ++x) {
+                        float v = s.block[(std::size_t(c) * stride * d.y() + y) * d.x() + x];
+                        for (int k = 1; k < window; ++k)
+                            v = better(v, s.block[((std::size_t(c) * stride + k) * d.y() + y) * d.x() + x]);
+                        const Coord ijk = region.min() + Coord(x, y, c);
+                        leaves[b].at(region, ijk, in.background()).setValueOn(ijk, v);
+                    }
+        }
+    });
+    for (auto& l : leaves) l.moveInto(out->tree());
+    return out;
+}
+
+} // namespace
+
+std::vector<openvdb::FloatGrid::Ptr> coarseLevels(const openvdb::FloatGrid& image, int levels, bool objectBrighter)
+{
+    if (levels < 0 || levels > 12) throw std::invalid_argument("coarseLevels: levels must be in [0, 12]");
+    initialize();
+    std::vector<openvdb::FloatGrid::Ptr> out;
+    openvdb::FloatGrid::ConstPtr pooled = image.copy(); // shares the tree: no copy
+    for (int l = 1; l <= levels; ++l) {
+        pooled = windowExtreme(*pooled, 2, 2, 0, objectBrighter);
+        auto level = windowExtreme(*pooled, 1, 3, -1, objectBrighter);
+        level->setName(kLevelGridPrefix + std::to_string(l));
+        out.push_back(level);
+    }
+    return out;
+}
+
+} // namespace riemesh::vdb

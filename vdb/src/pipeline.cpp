@@ -8,6 +8,7 @@
 
 #include <cerrno>
 #include <chrono>
+#include <algorithm>
 #include <cmath>
 #include <cstdlib>
 #include <memory>
@@ -150,9 +151,17 @@ void checkPipelineOptions(const PipelineOptions& o)
     count("--max-iterations", o.maxIterations, 1, 1e9);
     count("--max-vertices", double(o.maxVertices), 4, 1e12);
     count("--downsample", o.downsample, 1, 64);
+    count("--levels", o.levels, -1, 12);
     if (o.threads != 0) count("--threads", o.threads, 1, 65536);
     for (const auto& s : o.init.spheres)
         if (!(s.second > 0) || !s.first.allFinite()) throw PipelineInputError("--init sphere: radius must be > 0 and the centre finite");
+}
+
+int autoLevels(double longestSideVoxels, double deltaVoxels)
+{
+    int levels = 0;
+    while (levels < 12 && std::ldexp(deltaVoxels, levels + 1) * kCoarsestEdges <= longestSideVoxels) ++levels;
+    return levels;
 }
 
 std::pair<double, bool> pipelineIso(const ImageInfo& info, const std::optional<double>& givenIso, const std::string& source)
@@ -231,6 +240,10 @@ PipelineResult meshVolume(Volume& volume, const PipelineOptions& options)
     if (interrupted(PipelineStage::Smooth)) return r;
     volume.smooth(options.smooth);
     split(r.seconds.smooth);
+    const int longest = std::max({r.image.dims[0], r.image.dims[1], r.image.dims[2]});
+    r.levels = options.levels >= 0 ? options.levels : autoLevels(longest, options.delta);
+    volume.buildLevels(r.levels, objectBrighter);
+    split(r.seconds.levels);
     if (interrupted(PipelineStage::Convert)) return r;
     const NanoVolume nano = volume.nano();
     split(r.seconds.convert);
@@ -238,6 +251,14 @@ PipelineResult meshVolume(Volume& volume, const PipelineOptions& options)
     if (interrupted(PipelineStage::Evolve)) return r;
 
     NanoImage image(nano.imageGrid());
+    // Coarsest first, the image itself last.
+    std::vector<std::unique_ptr<NanoImage>> coarse;
+    std::vector<EvolutionLevel> levels;
+    for (int l = nano.levelCount(); l >= 1; --l) {
+        coarse.push_back(std::make_unique<NanoImage>(nano.levelGrid(l)));
+        levels.push_back({coarse.back().get(), std::ldexp(1.0, l)});
+    }
+    levels.push_back({&image, 1.0});
     EuclideanMetric euclidean;
     std::unique_ptr<NanoMetric> nanoMetric;
     if (options.riemannian && nano.metricDiag())
@@ -263,7 +284,7 @@ PipelineResult meshVolume(Volume& volume, const PipelineOptions& options)
         break;
     }
 
-    r.evolution = evolve(r.mesh, image, metric, opt);
+    r.evolution = evolve(r.mesh, levels, metric, opt);
     r.stop = r.evolution.reason;
     r.seconds.evolve = r.evolution.seconds;
     if (r.stop == StopReason::Interrupted) return r;
@@ -308,7 +329,8 @@ std::string pipelineStatsJson(const PipelineResult& r, const PipelineRecord& rec
                        {"init", o.init.spec},
                        {"open_borders", o.openBorders},
                        {"border_voxels_added", r.borderVoxels},
-                       {"downsample", o.downsample}};
+                       {"downsample", o.downsample},
+                       {"levels", r.levels}};
     if (o.riemannian)
         j["metric"] = {{"active_voxels", r.metric.activeVoxels},
                        {"total_voxels", r.metric.totalVoxels},
@@ -317,6 +339,7 @@ std::string pipelineStatsJson(const PipelineResult& r, const PipelineRecord& rec
     Json iterations = Json::array();
     for (const auto& s : r.evolution.iterations)
         iterations.push_back({{"iteration", s.iteration},
+                              {"level", s.level},
                               {"vertices", s.vertices},
                               {"mean_kinetic_energy", s.meanKineticEnergy},
                               {"splits", s.splits},
@@ -341,7 +364,8 @@ std::string pipelineStatsJson(const PipelineResult& r, const PipelineRecord& rec
                     {"read_seconds", record.readSeconds + r.seconds.downsample},
                     {"metric_seconds", r.seconds.metric},
                     {"stage_seconds", {{"borders", r.seconds.borders}, {"metric", r.seconds.tensor},
-                                       {"smooth", r.seconds.smooth}, {"convert", r.seconds.convert}}},
+                                       {"smooth", r.seconds.smooth}, {"levels", r.seconds.levels},
+                                       {"convert", r.seconds.convert}}},
                     {"evolve_seconds", r.seconds.evolve},
                     {"write_seconds", record.writeSeconds},
                     {"splits", e.splits},

@@ -65,6 +65,7 @@ struct Volume::Impl {
     openvdb::FloatGrid::Ptr image;
     openvdb::Vec3fGrid::Ptr diag, off;
     double muMax = 1.0;
+    FloatGrids levels; ///< coarse images for the schedule, level 1 first
 };
 
 Volume::Volume() : mImpl(std::make_unique<Impl>()) {}
@@ -244,7 +245,15 @@ void Volume::smooth(double sigmaVoxels)
 {
     if (sigmaVoxels <= 0) return;
     mImpl->image = gaussianSmooth(*mImpl->image, sigmaVoxels);
+    mImpl->levels.clear();
 }
+
+void Volume::buildLevels(int levels, bool objectBrighter)
+{
+    mImpl->levels = coarseLevels(*mImpl->image, levels, objectBrighter);
+}
+
+int Volume::levelCount() const { return int(mImpl->levels.size()); }
 
 VolumeMetricStats Volume::computeMetric(const VolumeMetricOptions& options)
 {
@@ -273,7 +282,7 @@ double Volume::metricMaxEigenvalue() const { return mImpl->muMax; }
 
 NanoVolume Volume::nano() const
 {
-    return toNanoVolume(*mImpl->image, mImpl->diag.get(), mImpl->off.get());
+    return toNanoVolume(*mImpl->image, mImpl->diag.get(), mImpl->off.get(), mImpl->levels);
 }
 
 void Volume::writeMetric(const std::string& path) const
@@ -284,7 +293,7 @@ void Volume::writeMetric(const std::string& path) const
 
 void Volume::exportNanoVDB(const std::string& path, double iso) const
 {
-    writeNvdb(path, *mImpl->image, mImpl->diag.get(), mImpl->off.get(), iso);
+    writeNvdb(path, *mImpl->image, mImpl->diag.get(), mImpl->off.get(), iso, mImpl->levels);
 }
 
 void Volume::downsample(int factor)
@@ -327,6 +336,7 @@ void Volume::downsample(int factor)
     mImpl->diag.reset();
     mImpl->off.reset();
     mImpl->muMax = 1.0;
+    mImpl->levels.clear();
     describe(mImpl->info, *out);
 }
 

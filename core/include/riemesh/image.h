@@ -103,6 +103,9 @@ inline constexpr const char* kMetricOffGrid = "metric_off";
 /// Optional one-voxel float grid holding, at the origin, the isovalue the image was segmented at
 /// (`vdb2mesh --iso 40 --export-nvdb`), so that a viewer opens the file at the same surface.
 inline constexpr const char* kIsoGrid = "riemesh_iso";
+/// Coarse images of a coarse-to-fine schedule in a .nvdb file: "riemesh_level_1", "riemesh_level_2",
+/// ... (vdb::coarseLevels; EvolutionLevel).
+inline constexpr const char* kLevelGridPrefix = "riemesh_level_";
 
 /// An image and (optionally) its metric as NanoVDB grids, owning their buffers: what
 /// `vdb2mesh --export-nvdb` writes and the viewer reads.
@@ -133,6 +136,10 @@ public:
     std::string imageName() const;
     /// Grid class of the image ("fog", "levelset" or "unknown").
     std::string imageClass() const;
+    /// Coarse images of a coarse-to-fine schedule (kLevelGridPrefix + l), level 1 (finest of them)
+    /// to levelCount(); nullptr outside.
+    int levelCount() const { return int(mLevels.size()); }
+    const nanovdb::FloatGrid* levelGrid(int level) const;
     /// The isovalue stored with the image (kIsoGrid), if any.
     bool hasIso() const { return mIsoGrid >= 0; }
     double iso() const;
@@ -140,6 +147,7 @@ public:
 private:
     std::vector<nanovdb::GridHandle<nanovdb::HostBuffer>> mHandles;
     int mImage = -1, mDiag = -1, mOff = -1, mIsoGrid = -1;
+    std::vector<int> mLevels; ///< handle index of level 1, 2, ...
     double mMuMax = 1.0;
     void index();
 };

@@ -20,19 +20,22 @@ namespace riemesh::vdb {
 nanovdb::GridHandle<nanovdb::HostBuffer> toNano(const openvdb::FloatGrid& grid);
 nanovdb::GridHandle<nanovdb::HostBuffer> toNano(const openvdb::Vec3fGrid& grid);
 
-/// The image and optional metric (both metric grids or neither) as NanoVDB handles, image first.
+using FloatGrids = std::vector<openvdb::FloatGrid::Ptr>;
+
+/// The image, optional metric (both metric grids or neither) and coarse levels (coarseLevels) as
+/// NanoVDB handles, image first.
 std::vector<nanovdb::GridHandle<nanovdb::HostBuffer>>
 toNanoHandles(const openvdb::FloatGrid& image, const openvdb::Vec3fGrid* metricDiag = nullptr,
-              const openvdb::Vec3fGrid* metricOff = nullptr);
+              const openvdb::Vec3fGrid* metricOff = nullptr, const FloatGrids& levels = {});
 
 /// The same as an in-memory riemesh::NanoVolume (what the core evolves against).
 NanoVolume toNanoVolume(const openvdb::FloatGrid& image, const openvdb::Vec3fGrid* metricDiag = nullptr,
-                        const openvdb::Vec3fGrid* metricOff = nullptr);
+                        const openvdb::Vec3fGrid* metricOff = nullptr, const FloatGrids& levels = {});
 
 /// Writes a .nvdb file atomically (temporary file beside `path`, then rename); a finite `iso` is
 /// stored with it (grid riemesh::kIsoGrid) for viewers.
 void writeNvdb(const std::string& path, const openvdb::FloatGrid& image,
                const openvdb::Vec3fGrid* metricDiag = nullptr, const openvdb::Vec3fGrid* metricOff = nullptr,
-               double iso = std::numeric_limits<double>::quiet_NaN());
+               double iso = std::numeric_limits<double>::quiet_NaN(), const FloatGrids& levels = {});
 
 } // namespace riemesh::vdb

@@ -62,7 +62,7 @@ InitialSurface parseInitialSurface(const std::string& spec);
 enum class PipelineStage {
     Borders, ///< closing the object where the image box cuts it
     Metric,  ///< structure tensor and metric (Riemannian only)
-    Smooth,  ///< the smoothed image the forces see
+    Smooth,  ///< the smoothed image the forces see, and its coarse levels
     Convert, ///< NanoVDB conversion for the core
     Evolve,  ///< the deformable model (reported again after every iteration)
 };
@@ -84,6 +84,11 @@ struct PipelineOptions {
     std::uint64_t maxVertices = kMaxVertices; ///< past it the run fails (PipelineInputError), >= 4
     bool openBorders = false;       ///< do not close objects cut by the image box
     int downsample = 1;             ///< block-average F^3 voxels first, [1, 64]
+    /// Coarse-to-fine levels below the finest (--levels): the model converges first with delta 2^L
+    /// on an image of 2^L-voxel blocks, then with half of it, ..., then the image as it is. -1: as
+    /// many as leave the coarsest level about kCoarsestEdges edges across the image (autoLevels);
+    /// 0: the finest level only. [-1, 12].
+    int levels = -1;
     int threads = 0;                ///< worker threads for the volume stages (0: all cores)
     InitialSurface init;            ///< --init
     /// Called when a stage starts (`iteration` null) and after every iteration of the evolution (stage
@@ -91,6 +96,12 @@ struct PipelineOptions {
     /// once with `stop` Interrupted. May be empty.
     std::function<bool(PipelineStage stage, const IterationStats* iteration)> progress;
 };
+
+/// Edges across the image's longest side at the coarsest level chosen by autoLevels.
+inline constexpr double kCoarsestEdges = 16.0;
+/// The levels for an image `longestSideVoxels` long meshed with edges of `deltaVoxels`: the largest
+/// L with 2^L delta kCoarsestEdges <= the side (0 for images up to ~96 voxels at delta 3).
+int autoLevels(double longestSideVoxels, double deltaVoxels);
 
 /// Throws PipelineInputError naming the option (vdb2mesh's flag) when a value is out of its range.
 void checkPipelineOptions(const PipelineOptions& options);
@@ -104,7 +115,7 @@ std::pair<double, bool> pipelineIso(const ImageInfo& image, const std::optional<
 struct PipelineTimings {
     double downsample = 0; ///< seconds
     double metric = 0;     ///< border closing, metric, smoothing, NanoVDB conversion (Borders to Convert)
-    double borders = 0, tensor = 0, smooth = 0, convert = 0; ///< the parts of `metric`
+    double borders = 0, tensor = 0, smooth = 0, levels = 0, convert = 0; ///< the parts of `metric`
     double evolve = 0;     ///< the evolution (EvolutionStats::seconds)
     double analysis = 0;   ///< topology and self-intersection counts
 };
@@ -118,6 +129,7 @@ struct PipelineResult {
     double iso = 0;                     ///< the isovalue used
     bool objectBrighter = true;         ///< inside is above iso (false for level sets)
     std::uint64_t borderVoxels = 0;     ///< voxels added by border closing
+    int levels = 0;                     ///< coarse-to-fine levels used below the finest
     VolumeMetricStats metric;           ///< zero with the Euclidean metric
     ImageInfo image;                    ///< the image meshed (after downsampling)
     PipelineOptions options;            ///< the options used (without the progress callback)

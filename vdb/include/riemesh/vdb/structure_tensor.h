@@ -13,6 +13,8 @@
 
 #include <openvdb/openvdb.h>
 
+#include <vector>
+
 namespace riemesh::vdb {
 
 struct StructureTensorOptions {
@@ -32,6 +34,16 @@ struct StructureTensorGrids {
 /// blur changes (within its reach of the active voxels) become active; constant active tiles keep
 /// their value. Same transform, name and class.
 openvdb::FloatGrid::Ptr gaussianSmooth(const openvdb::FloatGrid& image, double sigma);
+
+/// Coarse images for a coarse-to-fine schedule (riemesh::EvolutionLevel), level 1 to `levels`
+/// (<= 12): level l is the largest value of `image` (the smallest when `objectBrighter` is false:
+/// level sets, dark objects) over blocks of 2^l voxels, then over each block and its 26 neighbours,
+/// on a grid of 2^l-voxel cells (the transform says where). Its object thus holds the image's own
+/// object, grown by about one block, so a surface converged on a coarse level encloses the finer
+/// levels' and the finest's objects (thin plates, narrow gaps and all). Sparse like the rest: leaf
+/// nodes near the image's leaves are computed by bricks, constant tiles map to tiles. Named
+/// riemesh::kLevelGridPrefix + l, the image's class and background.
+std::vector<openvdb::FloatGrid::Ptr> coarseLevels(const openvdb::FloatGrid& image, int levels, bool objectBrighter);
 
 /// Structure tensor of `image`.
 StructureTensorGrids structureTensor(const openvdb::FloatGrid& image, const StructureTensorOptions& options = {});

@@ -68,6 +68,13 @@ public:
     /// Replaces the image by its Gaussian smoothing (sigma in voxels; 0 does nothing).
     void smooth(double sigmaVoxels);
 
+    /// Coarse images of the current image for a coarse-to-fine schedule (vdb::coarseLevels: block
+    /// extremes over 2^l voxels, dilated by a block, so that each holds the image's object),
+    /// levels 1..`levels`; nano() and exportNanoVDB() carry them. 0 removes them; smooth() and
+    /// downsample() drop them.
+    void buildLevels(int levels, bool objectBrighter);
+    int levelCount() const;
+
     /// Computes the structure-tensor metric of the current image (replacing any metric read from a
     /// .nvdb file).
     VolumeMetricStats computeMetric(const VolumeMetricOptions& options);
