@@ -258,6 +258,15 @@ NanoVolume NanoVolume::fromBytes(const std::uint8_t* data, std::size_t size)
     return volume;
 }
 
+NanoVolume NanoVolume::fromHandles(std::vector<nanovdb::GridHandle<nanovdb::HostBuffer>>&& handles)
+{
+    NanoVolume volume;
+    volume.mHandles = std::move(handles);
+    if (volume.mHandles.empty()) throw std::runtime_error("NanoVolume: no grid");
+    volume.index();
+    return volume;
+}
+
 double NanoVolume::iso() const
 {
     if (mIsoGrid < 0) throw std::logic_error("NanoVolume::iso: the volume stores no isovalue");

@@ -292,17 +292,7 @@ toNanoHandles(const openvdb::FloatGrid& image, const openvdb::Vec3fGrid* metricD
 NanoVolume toNanoVolume(const openvdb::FloatGrid& image, const openvdb::Vec3fGrid* metricDiag,
                         const openvdb::Vec3fGrid* metricOff)
 {
-    const auto handles = toNanoHandles(image, metricDiag, metricOff);
-    // NanoVDB 10's writeGrids seeks past the end of the stream to leave room for its header, which
-    // fails on an empty string stream: give it a zero-filled buffer large enough for everything.
-    std::size_t capacity = std::size_t(1) << 16;
-    for (const auto& h : handles) capacity += h.size() + 4096;
-    std::stringstream out(std::string(capacity, '\0'), std::ios::in | std::ios::out | std::ios::binary);
-    nanovdb::io::writeGrids<nanovdb::HostBuffer, std::vector>(out, handles);
-    const auto end = out.tellp();
-    if (!out || end <= 0) throw std::runtime_error("NanoVDB serialisation failed");
-    const std::string bytes = out.str();
-    return NanoVolume::fromBytes(reinterpret_cast<const std::uint8_t*>(bytes.data()), std::size_t(end));
+    return NanoVolume::fromHandles(toNanoHandles(image, metricDiag, metricOff));
 }
 
 void writeNvdb(const std::string& path, const openvdb::FloatGrid& image, const openvdb::Vec3fGrid* metricDiag,

@@ -1,311 +1,644 @@
-// Structure tensor and metric (structure_tensor.h, metric_grid.h): dense separable Gaussian blurs on the
-// image's active bounding box, multithreaded with TBB; the metric is written back sparse.
+// Structure tensor, metric and smoothing on sparse grids (structure_tensor.h, metric_grid.h).
+//
+// Work goes by bricks: cubes of kBrick^3 voxels aligned to the grid, each gathered with a halo into a
+// small dense block (one per thread, reused), filtered there by the kernels of brick_filters.h, and
+// written back into leaf nodes. Only bricks within the filters' reach of a leaf node are visited:
+// constant tiles and empty space cost nothing, and time and memory follow the active voxels (plus a
+// halo), not the bounding box. Bricks are independent, so they run in parallel (TBB), and every
+// result is assembled in brick order: the output does not depend on the number of threads.
+//
+// Samples outside the image's active bounding box read the nearest voxel of the box (the box's
+// edge is extended), so the filters see no artificial step where the data ends.
 #include "riemesh/vdb/metric_grid.h"
 #include "riemesh/vdb/structure_tensor.h"
 
 #include "riemesh/image.h"
 #include "riemesh/vdb/io.h"
-#include "dense.h"
+#include "brick_filters.h"
 
-#include <Eigen/Eigenvalues>
+#include <openvdb/tree/LeafManager.h>
 
 #include <tbb/blocked_range.h>
+#include <tbb/enumerable_thread_specific.h>
 #include <tbb/parallel_for.h>
 
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <limits>
+#include <memory>
+#include <optional>
+#include <utility>
 #include <stdexcept>
 
 namespace riemesh::vdb {
 namespace {
 
-using detail::DenseLayout;
-using Field = std::vector<float>;
+using openvdb::Coord;
+using openvdb::CoordBBox;
+using detail::BlockDims;
+using FloatLeaf = openvdb::FloatTree::LeafNodeType;
+using Vec3fLeaf = openvdb::Vec3fTree::LeafNodeType;
 
-constexpr std::size_t kMaxDenseVoxels = std::size_t(1) << 29; // 512M voxels: 2 GB per channel
+/// Brick edges tried, voxels (bricks are whole leaves, about this long): large bricks for dense data
+/// (less halo per voxel), small ones for thin shells such as a level set's narrow band.
+constexpr int kBrickSizes[] = {16, 24, 32, 48};
+constexpr int kLeafDim = int(FloatLeaf::DIM);
+static_assert(kLeafDim == 8, "leaf coordinates are shifted by 3");
 
-std::vector<float> gaussianKernel(double sigma)
-{
-    const int radius = std::max(1, int(std::ceil(3.0 * sigma)));
-    std::vector<float> w(2 * radius + 1);
-    double sum = 0;
-    for (int t = -radius; t <= radius; ++t) sum += (w[t + radius] = float(std::exp(-0.5 * t * t / (sigma * sigma))));
-    for (auto& x : w) x = float(x / sum);
-    return w;
-}
+int floorTo(int v, int step) { return v >= 0 ? v - v % step : -((-v + step - 1) / step) * step; }
 
-/// In-place separable Gaussian blur of a dense block (edges clamped); `scratch` is resized as needed.
-void blur(Field& f, const DenseLayout& L, double sigma, Field& scratch)
-{
-    if (!(sigma > 0)) return;
-    const auto w = gaussianKernel(sigma);
-    const int r = int(w.size() / 2);
-    const int nx = L.nx, ny = L.ny, nz = L.nz;
-    scratch.resize(f.size());
-    auto clampi = [](int v, int n) { return v < 0 ? 0 : (v >= n ? n - 1 : v); };
-    // x: contiguous lines.
-    tbb::parallel_for(tbb::blocked_range<int>(0, ny * nz), [&](const tbb::blocked_range<int>& rg) {
-        for (int line = rg.begin(); line != rg.end(); ++line) {
-            const float* in = f.data() + std::size_t(line) * nx;
-            float* out = scratch.data() + std::size_t(line) * nx;
-            for (int i = 0; i < nx; ++i) {
-                float s = 0;
-                for (int t = -r; t <= r; ++t) s += w[t + r] * in[clampi(i + t, nx)];
-                out[i] = s;
-            }
-        }
-    });
-    // y: per z slice, rows combined with contiguous inner loops.
-    tbb::parallel_for(tbb::blocked_range<int>(0, nz), [&](const tbb::blocked_range<int>& rg) {
-        for (int k = rg.begin(); k != rg.end(); ++k) {
-            const float* in = scratch.data() + std::size_t(k) * nx * ny;
-            float* out = f.data() + std::size_t(k) * nx * ny;
-            for (int j = 0; j < ny; ++j) {
-                float* o = out + std::size_t(j) * nx;
-                std::fill(o, o + nx, 0.0f);
-                for (int t = -r; t <= r; ++t) {
-                    const float* src = in + std::size_t(clampi(j + t, ny)) * nx;
-                    const float wt = w[t + r];
-                    for (int i = 0; i < nx; ++i) o[i] += wt * src[i];
-                }
-            }
-        }
-    });
-    // z: per y row, slices combined with contiguous inner loops.
-    tbb::parallel_for(tbb::blocked_range<int>(0, ny), [&](const tbb::blocked_range<int>& rg) {
-        for (int j = rg.begin(); j != rg.end(); ++j) {
-            for (int k = 0; k < nz; ++k) {
-                float* o = scratch.data() + (std::size_t(k) * ny + j) * nx;
-                std::fill(o, o + nx, 0.0f);
-                for (int t = -r; t <= r; ++t) {
-                    const float* src = f.data() + (std::size_t(clampi(k + t, nz)) * ny + j) * nx;
-                    const float wt = w[t + r];
-                    for (int i = 0; i < nx; ++i) o[i] += wt * src[i];
-                }
-            }
-        }
-    });
-    f.swap(scratch);
-}
-
-DenseLayout imageLayout(const openvdb::FloatGrid& image)
-{
-    const auto box = image.evalActiveVoxelBoundingBox();
-    if (box.empty()) throw std::runtime_error("image grid '" + image.getName() + "' has no active voxels");
-    DenseLayout L(box);
-    if (L.size() > kMaxDenseVoxels)
-        throw std::runtime_error("image box " + std::to_string(L.nx) + "x" + std::to_string(L.ny) + "x" +
-                                 std::to_string(L.nz) + " is too large for the dense structure tensor");
-    return L;
-}
-
-/// The six tensor channels Jxx Jyy Jzz Jxy Jxz Jyz (world space) on the image box.
-struct DenseTensor {
-    DenseLayout layout;
-    std::array<Field, 6> c;
+/// A brick: its voxels (inside the clip box) and its position in the brick lattice.
+struct Brick {
+    CoordBBox region;
+    Coord cell; ///< segment index along each axis
 };
 
-DenseTensor denseTensor(const openvdb::FloatGrid& image, const StructureTensorOptions& opt)
-{
-    if (!(opt.sigma >= 0) || !(opt.rho >= 0)) throw std::invalid_argument("structure tensor: sigma and rho must be >= 0");
-    initialize();
-    const DenseLayout L = imageLayout(image);
-    Field I = detail::gridToDense(image, L), scratch;
-    blur(I, L, opt.sigma, scratch);
-
-    // Index-space gradient -> world-space gradient: g_w = A^-T g_i (inverse Jacobian transpose).
-    const auto map = image.transform().baseMap();
-    openvdb::Vec3d col[3];
-    for (int a = 0; a < 3; ++a) {
-        openvdb::Vec3d e(0.0);
-        e[a] = 1.0;
-        col[a] = map->applyIJT(e);
-    }
-    DenseTensor T{L, {}};
-    for (auto& ch : T.c) ch.resize(L.size());
-    const int nx = L.nx, ny = L.ny, nz = L.nz;
-    tbb::parallel_for(tbb::blocked_range<int>(0, nz), [&](const tbb::blocked_range<int>& rg) {
-        for (int k = rg.begin(); k != rg.end(); ++k)
-            for (int j = 0; j < ny; ++j)
-                for (int i = 0; i < nx; ++i) {
-                    auto at = [&](int a, int b, int c) {
-                        return I[(std::size_t(c) * ny + b) * nx + a];
-                    };
-                    auto diff = [](double span, float vlo, float vhi) { return (vhi - vlo) / span; };
-                    const int i0 = std::max(i - 1, 0), i1 = std::min(i + 1, nx - 1);
-                    const int j0 = std::max(j - 1, 0), j1 = std::min(j + 1, ny - 1);
-                    const int k0 = std::max(k - 1, 0), k1 = std::min(k + 1, nz - 1);
-                    const double gi = i1 > i0 ? diff(i1 - i0, at(i0, j, k), at(i1, j, k)) : 0.0;
-                    const double gj = j1 > j0 ? diff(j1 - j0, at(i, j0, k), at(i, j1, k)) : 0.0;
-                    const double gk = k1 > k0 ? diff(k1 - k0, at(i, j, k0), at(i, j, k1)) : 0.0;
-                    const openvdb::Vec3d g = col[0] * gi + col[1] * gj + col[2] * gk;
-                    const std::size_t n = (std::size_t(k) * ny + j) * nx + i;
-                    T.c[0][n] = float(g[0] * g[0]);
-                    T.c[1][n] = float(g[1] * g[1]);
-                    T.c[2][n] = float(g[2] * g[2]);
-                    T.c[3][n] = float(g[0] * g[1]);
-                    T.c[4][n] = float(g[0] * g[2]);
-                    T.c[5][n] = float(g[1] * g[2]);
-                }
-    });
-    I.clear();
-    I.shrink_to_fit();
-    for (auto& ch : T.c) blur(ch, L, opt.rho, scratch);
-    return T;
-}
-
-Eigen::Matrix3d tensorAt(const DenseTensor& T, std::size_t n)
-{
-    Eigen::Matrix3d J;
-    J << T.c[0][n], T.c[3][n], T.c[4][n],
-         T.c[3][n], T.c[1][n], T.c[5][n],
-         T.c[4][n], T.c[5][n], T.c[2][n];
-    return J;
-}
-
-MetricGrids metricFromDense(const DenseTensor& T, const openvdb::math::Transform& transform, const MetricOptions& opt)
-{
-    if (!(opt.muMax >= 1.0) || !std::isfinite(opt.muMax)) throw std::invalid_argument("metric: muMax must be >= 1");
-    if (!(opt.referencePercentile > 0 && opt.referencePercentile <= 1))
-        throw std::invalid_argument("metric: referencePercentile must be in (0, 1]");
-    const DenseLayout& L = T.layout;
-    const std::size_t n = L.size();
-
-    // Robust scale: quantiles of xi_0 on a regular subsample (at most ~1M voxels).
-    const std::size_t stride = std::max<std::size_t>(1, n / 1000000);
-    std::vector<double> xi0((n + stride - 1) / stride);
-    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, xi0.size()), [&](const tbb::blocked_range<std::size_t>& rg) {
-        Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> es;
-        for (std::size_t s = rg.begin(); s != rg.end(); ++s) {
-            es.computeDirect(tensorAt(T, s * stride), Eigen::EigenvaluesOnly);
-            xi0[s] = std::max(0.0, es.eigenvalues()[2]);
-        }
-    });
-    auto quantile = [&](double q) {
-        const std::size_t k = std::min(xi0.size() - 1, std::size_t(q * double(xi0.size() - 1)));
-        std::nth_element(xi0.begin(), xi0.begin() + std::ptrdiff_t(k), xi0.end());
-        return xi0[k];
-    };
-    MetricGrids out;
-    out.muMax = opt.muMax;
-    out.totalVoxels = n;
-    out.xiRef = quantile(opt.referencePercentile);
-    const double median = quantile(0.5);
-    out.threshold = std::min(0.95, std::max(opt.threshold, out.xiRef > 0 ? opt.noiseFactor * median / out.xiRef : 1.0));
-
-    out.diag = openvdb::Vec3fGrid::create(openvdb::Vec3f(1.0f));
-    out.off = openvdb::Vec3fGrid::create(openvdb::Vec3f(0.0f));
-    for (auto* g : {&out.diag, &out.off}) {
-        (*g)->setTransform(transform.copy());
-        (*g)->setGridClass(openvdb::GRID_UNKNOWN);
-        (*g)->insertMeta(kMuMaxMetadata, openvdb::DoubleMetadata(opt.muMax));
-        (*g)->setVectorType(openvdb::VEC_INVARIANT);
-    }
-    out.diag->setName(riemesh::kMetricDiagGrid);
-    out.off->setName(riemesh::kMetricOffGrid);
-    if (!(out.xiRef > 0) || opt.muMax == 1.0) return out; // flat image or Euclidean request: G = I
-
-    // Per voxel G; identity voxels (the vast majority far from contours) are skipped cheaply:
-    // xi_0 <= trace(J), so trace(J) <= t * xi_ref means every mu_i = 1.
-    const double xiRef = out.xiRef, t = out.threshold, span = opt.muMax - 1.0;
-    if (!(opt.tangentialGain >= 1.0) || !std::isfinite(opt.tangentialGain))
-        throw std::invalid_argument("metric: tangentialGain must be >= 1");
-    const double gain = opt.tangentialGain; // on xi_1, xi_2 (ev[1], ev[0]; ascending order)
-    // The gain multiplies the excess over the noise threshold, not the eigenvalue itself: what noise
-    // leaves below t stays Euclidean whatever the gain (a boosted raw xi_1 let noise through at high
-    // noise and tangled the model).
-    auto mu = [&](double xi, double g) {
-        return 1.0 + span * std::clamp(g * (xi / xiRef - t) / (1.0 - t), 0.0, 1.0);
-    };
-    std::vector<openvdb::Vec3f> diag(n), off(n);
-    std::vector<std::uint8_t> active(n, 0);
-    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n, 4096), [&](const tbb::blocked_range<std::size_t>& rg) {
-        Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> es;
-        for (std::size_t v = rg.begin(); v != rg.end(); ++v) {
-            const double trace = double(T.c[0][v]) + T.c[1][v] + T.c[2][v];
-            if (trace <= t * xiRef) continue;
-            es.computeDirect(tensorAt(T, v));
-            const Eigen::Vector3d ev = es.eigenvalues(); // ascending: xi_2, xi_1, xi_0
-            const Eigen::Vector3d m(mu(ev[0], gain), mu(ev[1], gain), mu(ev[2], 1.0));
-            if (m.maxCoeff() - 1.0 < opt.activeTolerance) continue;
-            const Eigen::Matrix3d V = es.eigenvectors();
-            const Eigen::Matrix3d G = V * m.asDiagonal() * V.transpose();
-            diag[v] = openvdb::Vec3f(float(G(0, 0)), float(G(1, 1)), float(G(2, 2)));
-            off[v] = openvdb::Vec3f(float(G(0, 1)), float(G(0, 2)), float(G(1, 2)));
-            active[v] = 1;
-        }
-    });
-    auto diagAcc = out.diag->getAccessor();
-    auto offAcc = out.off->getAccessor();
-    for (int k = 0; k < L.nz; ++k)
-        for (int j = 0; j < L.ny; ++j)
-            for (int i = 0; i < L.nx; ++i) {
-                const std::size_t v = (std::size_t(k) * L.ny + j) * L.nx + i;
-                if (!active[v]) continue;
-                const openvdb::Coord c = L.box.min() + openvdb::Coord(i, j, k);
-                diagAcc.setValue(c, diag[v]);
-                offAcc.setValue(c, off[v]);
-                ++out.activeVoxels;
+/// The clip box cut along each axis into segments of whole leaves, about `brick` voxels each and of
+/// equal length (no thin leftover brick at the far side, where the halo would cost the most).
+class BrickLattice {
+public:
+    BrickLattice(const CoordBBox& clip, int brick) : mClip(clip)
+    {
+        for (int a = 0; a < 3; ++a) {
+            mFirstLeaf[a] = floorTo(clip.min()[a], kLeafDim);
+            const int leaves = (clip.max()[a] - mFirstLeaf[a]) / kLeafDim + 1;
+            const int segments = std::max(1, int(std::lround(double(leaves) * kLeafDim / brick)));
+            mSegmentOfLeaf[a].resize(std::size_t(leaves));
+            for (int s = 0; s < segments; ++s) {
+                const int l0 = int(std::int64_t(s) * leaves / segments), l1 = int(std::int64_t(s + 1) * leaves / segments);
+                mStart[a].push_back(std::max(clip.min()[a], mFirstLeaf[a] + l0 * kLeafDim));
+                for (int l = l0; l < l1; ++l) mSegmentOfLeaf[a][std::size_t(l)] = s;
             }
-    return out;
+            mStart[a].push_back(clip.max()[a] + 1);
+        }
+    }
+    /// Segment along axis a of coordinate v (inside the clip box).
+    int segment(int a, int v) const { return mSegmentOfLeaf[a][std::size_t((v - mFirstLeaf[a]) / kLeafDim)]; }
+    Brick brick(const Coord& cell) const
+    {
+        Coord lo, hi;
+        for (int a = 0; a < 3; ++a) {
+            lo[a] = mStart[a][std::size_t(cell[a])];
+            hi[a] = mStart[a][std::size_t(cell[a]) + 1] - 1;
+        }
+        return Brick{CoordBBox(lo, hi), cell};
+    }
+    const CoordBBox& clip() const { return mClip; }
+
+private:
+    CoordBBox mClip;
+    int mFirstLeaf[3];
+    std::vector<int> mStart[3];
+    std::vector<int> mSegmentOfLeaf[3];
+};
+
+/// The bricks of `lattice` with a voxel within `reach` voxels of a leaf node of `tree`, sorted, so
+/// that the order (and every result assembled in it) is the same on any run.
+template<typename TreeT>
+std::vector<Brick> bricksNearLeaves(const TreeT& tree, int reach, const BrickLattice& lattice)
+{
+    const CoordBBox& clip = lattice.clip();
+    std::vector<Coord> cells;
+    for (auto it = tree.cbeginLeaf(); it; ++it) {
+        CoordBBox box(it->origin().offsetBy(-reach), it->origin().offsetBy(kLeafDim - 1 + reach));
+        box.intersect(clip);
+        if (box.empty()) continue;
+        Coord lo, hi;
+        for (int a = 0; a < 3; ++a) {
+            lo[a] = lattice.segment(a, box.min()[a]);
+            hi[a] = lattice.segment(a, box.max()[a]);
+        }
+        for (int z = lo.z(); z <= hi.z(); ++z)
+            for (int y = lo.y(); y <= hi.y(); ++y)
+                for (int x = lo.x(); x <= hi.x(); ++x) cells.emplace_back(x, y, z);
+    }
+    std::sort(cells.begin(), cells.end(), [](const Coord& a, const Coord& b) {
+        return a.z() != b.z() ? a.z() < b.z() : a.y() != b.y() ? a.y() < b.y() : a.x() < b.x();
+    });
+    cells.erase(std::unique(cells.begin(), cells.end()), cells.end());
+    std::vector<Brick> bricks;
+    bricks.reserve(cells.size());
+    for (const Coord& c : cells) bricks.push_back(lattice.brick(c));
+    return bricks;
+}
+
+/// The brick lattice over `clip` whose bricks near the leaves of `tree` gather the fewest voxels
+/// with a halo of `halo` (the filters' work is about proportional to that), and those bricks.
+template<typename TreeT>
+std::pair<BrickLattice, std::vector<Brick>> cheapestBricks(const TreeT& tree, int reach, int halo, const CoordBBox& clip)
+{
+    std::optional<std::pair<BrickLattice, std::vector<Brick>>> best;
+    double bestCost = 0;
+    for (const int size : kBrickSizes) {
+        BrickLattice lattice(clip, size);
+        std::vector<Brick> bricks = bricksNearLeaves(tree, reach, lattice);
+        double cost = 0;
+        for (const Brick& b : bricks) {
+            const Coord d = b.region.dim();
+            cost += double(d.x() + 2 * halo) * (d.y() + 2 * halo) * (d.z() + 2 * halo);
+        }
+        if (!best || cost < bestCost) {
+            bestCost = cost;
+            best.emplace(std::move(lattice), std::move(bricks));
+        }
+    }
+    return std::move(*best);
+}
+
+/// The values of `tree` over `box` into `out` (x fastest), reading coordinates outside `clamp` at
+/// the nearest voxel of `clamp` (which must intersect `box`). Leaf nodes are copied whole rows at a
+/// time; tiles and background fill their part of the block with one value.
+void gather(const openvdb::FloatTree& tree, const CoordBBox& box, const CoordBBox& clamp, float* out)
+{
+    const Coord dim = box.dim();
+    const int nx = dim.x(), ny = dim.y();
+    auto at = [&](int x, int y, int z) -> float& {
+        return out[(std::size_t(z - box.min().z()) * ny + (y - box.min().y())) * nx + (x - box.min().x())];
+    };
+    CoordBBox inner = box;
+    inner.intersect(clamp);
+    openvdb::tree::ValueAccessor<const openvdb::FloatTree> acc(tree);
+    // Leaf-sized pieces of the part inside `clamp`.
+    const Coord l0(floorTo(inner.min().x(), kLeafDim), floorTo(inner.min().y(), kLeafDim), floorTo(inner.min().z(), kLeafDim));
+    for (int lz = l0.z(); lz <= inner.max().z(); lz += kLeafDim)
+        for (int ly = l0.y(); ly <= inner.max().y(); ly += kLeafDim)
+            for (int lx = l0.x(); lx <= inner.max().x(); lx += kLeafDim) {
+                const Coord origin(lx, ly, lz);
+                const int x0 = std::max(lx, inner.min().x()), x1 = std::min(lx + kLeafDim - 1, inner.max().x());
+                const int y0 = std::max(ly, inner.min().y()), y1 = std::min(ly + kLeafDim - 1, inner.max().y());
+                const int z0 = std::max(lz, inner.min().z()), z1 = std::min(lz + kLeafDim - 1, inner.max().z());
+                if (const FloatLeaf* leaf = acc.probeConstLeaf(origin)) {
+                    const float* data = leaf->buffer().data(); // z fastest: ((x & 7) << 6) | ((y & 7) << 3) | (z & 7)
+                    for (int z = z0; z <= z1; ++z)
+                        for (int y = y0; y <= y1; ++y) {
+                            float* row = &at(x0, y, z);
+                            const float* src = data + (((y - ly) << 3) | (z - lz));
+                            for (int x = x0; x <= x1; ++x) row[x - x0] = src[(x - lx) << 6];
+                        }
+                } else {
+                    const float v = acc.getValue(origin);
+                    for (int z = z0; z <= z1; ++z)
+                        for (int y = y0; y <= y1; ++y) std::fill_n(&at(x0, y, z), x1 - x0 + 1, v);
+                }
+            }
+    // Extend the box's edge outward: x within rows, then whole rows along y, then slices along z.
+    const int ix0 = inner.min().x(), ix1 = inner.max().x(), iy0 = inner.min().y(), iy1 = inner.max().y();
+    const int iz0 = inner.min().z(), iz1 = inner.max().z();
+    if (ix0 > box.min().x() || ix1 < box.max().x())
+        for (int z = iz0; z <= iz1; ++z)
+            for (int y = iy0; y <= iy1; ++y) {
+                const float lo = at(ix0, y, z), hi = at(ix1, y, z);
+                for (int x = box.min().x(); x < ix0; ++x) at(x, y, z) = lo;
+                for (int x = ix1 + 1; x <= box.max().x(); ++x) at(x, y, z) = hi;
+            }
+    for (int z = iz0; z <= iz1; ++z) {
+        for (int y = box.min().y(); y < iy0; ++y) std::copy_n(&at(box.min().x(), iy0, z), nx, &at(box.min().x(), y, z));
+        for (int y = iy1 + 1; y <= box.max().y(); ++y) std::copy_n(&at(box.min().x(), iy1, z), nx, &at(box.min().x(), y, z));
+    }
+    const std::size_t slice = std::size_t(nx) * ny;
+    for (int z = box.min().z(); z < iz0; ++z) std::copy_n(&at(box.min().x(), box.min().y(), iz0), slice, &at(box.min().x(), box.min().y(), z));
+    for (int z = iz1 + 1; z <= box.max().z(); ++z) std::copy_n(&at(box.min().x(), box.min().y(), iz1), slice, &at(box.min().x(), box.min().y(), z));
+}
+
+/// Separable Gaussian of the block `d` (taps of radius r): the result, shorter by 2r along every axis,
+/// ends in `block`; `scratch` is reused. Returns the result's dimensions.
+BlockDims blur3(std::vector<float>& block, BlockDims d, const std::vector<float>& taps, std::vector<float>& scratch)
+{
+    const auto& k = detail::brickKernels();
+    const int r = int(taps.size() / 2);
+    scratch.resize(std::size_t(d.nx - 2 * r) * d.ny * d.nz);
+    k.blurX(block.data(), d, taps.data(), r, scratch.data());
+    d.nx -= 2 * r;
+    block.resize(std::size_t(d.nx) * (d.ny - 2 * r) * d.nz);
+    k.blurY(scratch.data(), d, taps.data(), r, block.data());
+    d.ny -= 2 * r;
+    scratch.resize(std::size_t(d.nx) * d.ny * (d.nz - 2 * r));
+    k.blurZ(block.data(), d, taps.data(), r, scratch.data());
+    d.nz -= 2 * r;
+    block.swap(scratch);
+    return d;
+}
+
+/// The dimensions of `box` grown by `halo` on every side.
+BlockDims grown(const CoordBBox& box, int halo)
+{
+    return BlockDims{box.dim().x() + 2 * halo, box.dim().y() + 2 * halo, box.dim().z() + 2 * halo};
+}
+
+/// What a thread needs for one brick (reused from brick to brick).
+struct BrickScratch {
+    std::vector<float> block, scratch;
+    std::array<std::vector<float>, 6> channel; ///< Jxx Jyy Jzz Jxy Jxz Jyz over the brick, x fastest
+    std::vector<std::uint32_t> index;          ///< voxels of the brick (x fastest) picked by a pass
+    std::vector<float> values;
+    std::vector<std::uint8_t> mask;
+};
+
+/// The structure tensor J of the image over a brick's region (world space) into s.channel, x fastest
+/// over the region.
+class TensorBricks {
+public:
+    TensorBricks(const openvdb::FloatGrid& image, const StructureTensorOptions& opt, const CoordBBox& clamp)
+        : mTree(image.tree()), mClamp(clamp)
+    {
+        if (opt.sigma > 0) mImageTaps = detail::gaussianTaps(opt.sigma);
+        if (opt.rho > 0) mTensorTaps = detail::gaussianTaps(opt.rho);
+        mHalo = int(mImageTaps.size() / 2) + 1 + int(mTensorTaps.size() / 2);
+        // Index-space gradient -> world-space gradient: g_w = A^-T g_i (the inverse Jacobian transpose).
+        const auto map = image.transform().baseMap();
+        for (int a = 0; a < 3; ++a) {
+            openvdb::Vec3d e(0.0);
+            e[a] = 1.0;
+            const openvdb::Vec3d col = map->applyIJT(e);
+            for (int row = 0; row < 3; ++row) mToWorld[row * 3 + a] = col[row];
+        }
+    }
+    int halo() const { return mHalo; }
+
+    void compute(const CoordBBox& region, BrickScratch& s) const
+    {
+        const auto& k = detail::brickKernels();
+        BlockDims d = grown(region, mHalo);
+        s.block.resize(d.size());
+        gather(mTree, region.expandBy(mHalo), mClamp, s.block.data());
+        if (!mImageTaps.empty()) d = blur3(s.block, d, mImageTaps, s.scratch);
+        const BlockDims g{d.nx - 2, d.ny - 2, d.nz - 2}; // where the gradient is defined
+        const int r = int(mTensorTaps.size() / 2);
+        float* out[6];
+        for (int c = 0; c < 6; ++c) {
+            s.channel[c].resize(std::size_t(g.nx - 2 * r) * g.ny * g.nz);
+            out[c] = s.channel[c].data();
+        }
+        if (mTensorTaps.empty()) {
+            k.tensorProducts(s.block.data(), d, mToWorld.data(), out);
+            return;
+        }
+        k.tensorBlurX(s.block.data(), d, mToWorld.data(), mTensorTaps.data(), r, out);
+        for (auto& ch : s.channel) {
+            BlockDims c{g.nx - 2 * r, g.ny, g.nz};
+            s.scratch.resize(std::size_t(c.nx) * (c.ny - 2 * r) * c.nz);
+            k.blurY(ch.data(), c, mTensorTaps.data(), r, s.scratch.data());
+            c.ny -= 2 * r;
+            ch.resize(std::size_t(c.nx) * c.ny * (c.nz - 2 * r));
+            k.blurZ(s.scratch.data(), c, mTensorTaps.data(), r, ch.data());
+        }
+    }
+
+private:
+    const openvdb::FloatTree& mTree;
+    CoordBBox mClamp;
+    std::vector<float> mImageTaps, mTensorTaps;
+    int mHalo = 1;
+    std::array<double, 9> mToWorld{};
+};
+
+/// Calls f(n, ijk) for the voxels of `region` (n: index in the region, x fastest).
+template<typename F>
+void forBrickVoxels(const CoordBBox& region, F&& f)
+{
+    const Coord d = region.dim();
+    std::size_t n = 0;
+    for (int z = region.min().z(); z <= region.max().z(); ++z)
+        for (int y = region.min().y(); y <= region.max().y(); ++y)
+            for (int x = region.min().x(); x <= region.max().x(); ++x, ++n) f(n, Coord(x, y, z));
+    (void)d;
+}
+
+/// The leaf nodes a brick writes, created on first use; handed to the grid afterwards in brick order.
+template<typename LeafT>
+struct BrickLeaves {
+    Coord first;  ///< origin of the brick's first leaf
+    Coord count;  ///< leaves along each axis
+    std::vector<std::unique_ptr<LeafT>> leaf;
+    LeafT& at(const CoordBBox& region, const Coord& ijk, const typename LeafT::ValueType& background)
+    {
+        if (leaf.empty()) {
+            first = Coord(floorTo(region.min().x(), kLeafDim), floorTo(region.min().y(), kLeafDim), floorTo(region.min().z(), kLeafDim));
+            count = (region.max() - first) >> 3;
+            count = count.offsetBy(1);
+            leaf.resize(std::size_t(count.x()) * count.y() * count.z());
+        }
+        const Coord rel = (ijk - first) >> 3;
+        const std::size_t i = (std::size_t(rel.z()) * count.y() + rel.y()) * count.x() + rel.x();
+        if (!leaf[i]) leaf[i] = std::make_unique<LeafT>(ijk & ~(kLeafDim - 1), background, false);
+        return *leaf[i];
+    }
+    template<typename TreeT>
+    void moveInto(TreeT& tree)
+    {
+        for (auto& l : leaf)
+            if (l) tree.addLeaf(l.release());
+        leaf.clear();
+    }
+};
+
+CoordBBox activeBox(const openvdb::FloatGrid& image)
+{
+    const CoordBBox box = image.evalActiveVoxelBoundingBox();
+    if (box.empty()) throw std::runtime_error("image grid '" + image.getName() + "' has no active voxels");
+    return box;
+}
+
+openvdb::Vec3fGrid::Ptr metricGrid(const char* name, const openvdb::Vec3f& background,
+                                   const openvdb::math::Transform& transform, double muMax)
+{
+    auto g = openvdb::Vec3fGrid::create(background);
+    g->setName(name);
+    g->setTransform(transform.copy());
+    g->setGridClass(openvdb::GRID_UNKNOWN);
+    g->insertMeta(kMuMaxMetadata, openvdb::DoubleMetadata(muMax));
+    g->setVectorType(openvdb::VEC_INVARIANT);
+    return g;
+}
+
+void checkTensorOptions(const StructureTensorOptions& opt)
+{
+    if (!(opt.sigma >= 0) || !(opt.rho >= 0) || !std::isfinite(opt.sigma) || !std::isfinite(opt.rho))
+        throw std::invalid_argument("structure tensor: sigma and rho must be finite and >= 0");
+    if (opt.sigma > 64 || opt.rho > 64) throw std::invalid_argument("structure tensor: sigma and rho must be <= 64 voxels");
 }
 
 } // namespace
 
 openvdb::FloatGrid::Ptr gaussianSmooth(const openvdb::FloatGrid& image, double sigma)
 {
-    if (!(sigma >= 0)) throw std::invalid_argument("gaussianSmooth: sigma must be >= 0");
+    if (!(sigma >= 0) || !std::isfinite(sigma) || sigma > 64)
+        throw std::invalid_argument("gaussianSmooth: sigma must be in [0, 64] voxels");
     initialize();
-    const DenseLayout L = imageLayout(image);
-    Field I = detail::gridToDense(image, L), scratch;
-    blur(I, L, sigma, scratch);
-    auto out = detail::denseToGrid<openvdb::FloatGrid>(I, L, image.background());
-    out->setTransform(image.transform().copy());
-    out->setName(image.getName());
-    out->setGridClass(image.getGridClass());
+    auto out = image.deepCopy();
+    if (sigma == 0) return out;
+    const CoordBBox box = activeBox(image);
+    const auto taps = detail::gaussianTaps(sigma);
+    const int r = int(taps.size() / 2);
+    // Voxels of leaf nodes take their smoothed values; voxels outside the active set become active
+    // where smoothing changes them (the blur spreads an object's values beyond its active voxels, as
+    // far as the kernel reaches, e.g. into the corners between the caps of closeBorders). Constant
+    // active tiles keep their value (exact inside; at their border only where they meet different
+    // values, which leaf nodes hold).
+    const auto [lattice, bricks] = cheapestBricks(image.tree(), r, r, box);
+    std::vector<BrickLeaves<FloatLeaf>> added(bricks.size());
+    tbb::enumerable_thread_specific<BrickScratch> scratch;
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, bricks.size(), 1), [&](const tbb::blocked_range<std::size_t>& rg) {
+        BrickScratch& s = scratch.local();
+        openvdb::tree::ValueAccessor<const openvdb::FloatTree> acc(image.tree());
+        for (std::size_t b = rg.begin(); b != rg.end(); ++b) {
+            const CoordBBox& region = bricks[b].region;
+            const Coord first(floorTo(region.min().x(), kLeafDim), floorTo(region.min().y(), kLeafDim), floorTo(region.min().z(), kLeafDim));
+            const BlockDims d = grown(region, r);
+            s.block.resize(d.size());
+            gather(image.tree(), region.expandBy(r), box, s.block.data());
+            blur3(s.block, d, taps, s.scratch);
+            const Coord rd = region.dim();
+            auto smoothed = [&](const Coord& ijk) {
+                const Coord rel = ijk - region.min();
+                return s.block[(std::size_t(rel.z()) * rd.y() + rel.y()) * rd.x() + rel.x()];
+            };
+            auto changed = [](float now, float before) {
+                return std::abs(now - before) > 1e-5f * std::max(1.0f, std::abs(before));
+            };
+            for (int lz = first.z(); lz <= region.max().z(); lz += kLeafDim)
+                for (int ly = first.y(); ly <= region.max().y(); ly += kLeafDim)
+                    for (int lx = first.x(); lx <= region.max().x(); lx += kLeafDim) {
+                        const Coord leafOrigin(lx, ly, lz);
+                        CoordBBox part(leafOrigin, leafOrigin.offsetBy(kLeafDim - 1));
+                        part.intersect(region);
+                        if (part.empty()) continue;
+                        // Leaf nodes are never added or removed here: probing from threads is safe.
+                        if (FloatLeaf* leaf = out->tree().probeLeaf(leafOrigin)) {
+                            for (auto it = part.begin(); it; ++it) {
+                                const auto i = FloatLeaf::coordToOffset(*it);
+                                const float v = smoothed(*it);
+                                if (leaf->isValueOn(i) || changed(v, leaf->getValue(i))) leaf->setValueOn(i, v);
+                            }
+                            continue;
+                        }
+                        float before;
+                        if (acc.probeValue(leafOrigin, before)) continue; // an active tile
+                        for (auto it = part.begin(); it; ++it) {
+                            const float v = smoothed(*it);
+                            if (changed(v, before)) added[b].at(region, *it, before).setValueOn(*it, v);
+                        }
+                    }
+        }
+    });
+    for (auto& leaves : added) leaves.moveInto(out->tree());
     return out;
 }
 
 StructureTensorGrids structureTensor(const openvdb::FloatGrid& image, const StructureTensorOptions& options)
 {
-    const DenseTensor T = denseTensor(image, options);
-    const DenseLayout& L = T.layout;
-    std::vector<openvdb::Vec3f> d(L.size()), o(L.size());
-    for (std::size_t v = 0; v < L.size(); ++v) {
-        d[v] = openvdb::Vec3f(T.c[0][v], T.c[1][v], T.c[2][v]);
-        o[v] = openvdb::Vec3f(T.c[3][v], T.c[4][v], T.c[5][v]);
-    }
+    checkTensorOptions(options);
+    initialize();
+    const CoordBBox box = activeBox(image);
+    const TensorBricks tensor(image, options, box);
+    const auto [lattice, bricks] = cheapestBricks(image.tree(), tensor.halo(), tensor.halo(), box);
+    std::vector<BrickLeaves<Vec3fLeaf>> diag(bricks.size()), off(bricks.size());
+    tbb::enumerable_thread_specific<BrickScratch> scratch;
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, bricks.size(), 1), [&](const tbb::blocked_range<std::size_t>& rg) {
+        BrickScratch& s = scratch.local();
+        for (std::size_t b = rg.begin(); b != rg.end(); ++b) {
+            tensor.compute(bricks[b].region, s);
+            forBrickVoxels(bricks[b].region, [&](std::size_t n, const Coord& ijk) {
+                diag[b].at(bricks[b].region, ijk, openvdb::Vec3f(0.0f))
+                    .setValueOn(ijk, openvdb::Vec3f(s.channel[0][n], s.channel[1][n], s.channel[2][n]));
+                off[b].at(bricks[b].region, ijk, openvdb::Vec3f(0.0f))
+                    .setValueOn(ijk, openvdb::Vec3f(s.channel[3][n], s.channel[4][n], s.channel[5][n]));
+            });
+        }
+    });
     StructureTensorGrids out;
-    out.diag = detail::denseToGrid<openvdb::Vec3fGrid>(d, L, openvdb::Vec3f(0.0f));
-    out.off = detail::denseToGrid<openvdb::Vec3fGrid>(o, L, openvdb::Vec3f(0.0f));
+    out.diag = openvdb::Vec3fGrid::create(openvdb::Vec3f(0.0f));
+    out.off = openvdb::Vec3fGrid::create(openvdb::Vec3f(0.0f));
+    for (std::size_t b = 0; b < bricks.size(); ++b) {
+        diag[b].moveInto(out.diag->tree());
+        off[b].moveInto(out.off->tree());
+    }
     for (auto* g : {&out.diag, &out.off}) (*g)->setTransform(image.transform().copy());
     out.diag->setName("tensor_diag");
     out.off->setName("tensor_off");
     return out;
 }
 
-MetricGrids metricFromStructureTensor(const StructureTensorGrids& tensor, const MetricOptions& options)
-{
-    if (!tensor.diag || !tensor.off) throw std::invalid_argument("metricFromStructureTensor: missing tensor grids");
-    const auto box = tensor.diag->evalActiveVoxelBoundingBox();
-    if (box.empty()) throw std::invalid_argument("metricFromStructureTensor: empty tensor grids");
-    DenseTensor T{DenseLayout(box), {}};
-    const auto d = detail::gridToDense(*tensor.diag, T.layout);
-    const auto o = detail::gridToDense(*tensor.off, T.layout);
-    for (auto& ch : T.c) ch.resize(T.layout.size());
-    for (std::size_t v = 0; v < T.layout.size(); ++v)
-        for (int a = 0; a < 3; ++a) {
-            T.c[a][v] = d[v][a];
-            T.c[3 + a][v] = o[v][a];
-        }
-    return metricFromDense(T, tensor.diag->transform(), options);
-}
-
 MetricGrids computeMetric(const openvdb::FloatGrid& image, const StructureTensorOptions& tensorOptions,
-                          const MetricOptions& options)
+                          const MetricOptions& opt)
 {
-    return metricFromDense(denseTensor(image, tensorOptions), image.transform(), options);
+    checkTensorOptions(tensorOptions);
+    if (!(opt.muMax >= 1.0) || !std::isfinite(opt.muMax)) throw std::invalid_argument("metric: muMax must be >= 1");
+    if (!(opt.referencePercentile > 0 && opt.referencePercentile <= 1))
+        throw std::invalid_argument("metric: referencePercentile must be in (0, 1]");
+    if (!(opt.tangentialGain >= 1.0) || !std::isfinite(opt.tangentialGain))
+        throw std::invalid_argument("metric: tangentialGain must be >= 1");
+    initialize();
+    const CoordBBox box = activeBox(image);
+
+    MetricGrids out;
+    out.muMax = opt.muMax;
+    out.totalVoxels = box.volume();
+    out.diag = metricGrid(riemesh::kMetricDiagGrid, openvdb::Vec3f(1.0f), image.transform(), opt.muMax);
+    out.off = metricGrid(riemesh::kMetricOffGrid, openvdb::Vec3f(0.0f), image.transform(), opt.muMax);
+    if (opt.muMax == 1.0) return out; // Euclidean request: G = I
+
+    const TensorBricks tensor(image, tensorOptions, box);
+    // A level set's metric lives in its narrow band (the active voxels: where its surface can be);
+    // other images' wherever the filters reach from their leaf nodes.
+    const bool levelSet = image.getGridClass() == openvdb::GRID_LEVEL_SET;
+    const auto [lattice, bricks] = cheapestBricks(image.tree(), levelSet ? 0 : tensor.halo(), tensor.halo(), box);
+    tbb::enumerable_thread_specific<BrickScratch> scratch;
+
+    // The tensor of the bricks pass 1 computed, kept for pass 2 when the image is small.
+    std::vector<std::array<std::vector<float>, 6>> kept;
+    if (levelSet) {
+        // A level set is a signed distance in world units: |grad| = 1 in its band, so J's largest
+        // eigenvalue there is 1 (minus the blur at the band's edges), and it carries no noise to
+        // measure. Every brick is computed once, in pass 2.
+        out.xiRef = 1.0;
+        out.threshold = opt.threshold;
+    } else {
+        // Pass 1, the scale of the image: the quantiles of xi_0 on a lattice of about kSamples voxels.
+        // A large image is sampled in every other brick along each axis (one brick in eight, on a
+        // regular pattern over the whole box), a small one (few bricks) in all of them, whose tensor
+        // pass 2 then reuses. Lattice voxels that no brick reaches are farther than the filters from
+        // any leaf node: their tensor is 0, and they count as zeros without being visited.
+        constexpr double kSamples = 5e5;
+        constexpr std::size_t kSmall = 27; // bricks: up to 27 * 48^3 voxels, 72 MB of tensor kept
+        const bool all = bricks.size() <= kSmall;
+        std::vector<std::size_t> pass1;
+        for (std::size_t b = 0; b < bricks.size(); ++b) {
+            const Coord& c = bricks[b].cell;
+            if (all || (c.x() % 2 == 0 && c.y() % 2 == 0 && c.z() % 2 == 0)) pass1.push_back(b);
+        }
+        // Per axis: the box's coordinates in sampled brick columns, then the lattice on them.
+        std::array<std::vector<int>, 3> coords;
+        double population = 1;
+        for (int a = 0; a < 3; ++a) {
+            for (int v = box.min()[a]; v <= box.max()[a]; ++v)
+                if (all || lattice.segment(a, v) % 2 == 0) coords[a].push_back(v);
+            population *= double(coords[a].size());
+        }
+        const int stride = std::max(1, int(std::ceil(std::cbrt(population / kSamples))));
+        std::uint64_t latticeTotal = 1;
+        for (int a = 0; a < 3; ++a) latticeTotal *= std::uint64_t((coords[a].size() + stride - 1) / stride);
+        // A voxel is on the lattice when its coordinate's rank among coords[a] is a multiple of stride.
+        std::array<std::vector<char>, 3> onAxis;
+        for (int a = 0; a < 3; ++a) {
+            onAxis[a].assign(std::size_t(box.dim()[a]), 0);
+            for (std::size_t i = 0; i < coords[a].size(); i += std::size_t(stride))
+                onAxis[a][std::size_t(coords[a][i] - box.min()[a])] = 1;
+        }
+        auto onLattice = [&](const Coord& ijk) {
+            const Coord rel = ijk - box.min();
+            return onAxis[0][rel.x()] && onAxis[1][rel.y()] && onAxis[2][rel.z()];
+        };
+        if (all) kept.resize(bricks.size());
+        std::vector<std::vector<float>> samples(pass1.size());
+        tbb::parallel_for(tbb::blocked_range<std::size_t>(0, pass1.size(), 1), [&](const tbb::blocked_range<std::size_t>& rg) {
+            BrickScratch& s = scratch.local();
+            for (std::size_t p = rg.begin(); p != rg.end(); ++p) {
+                const std::size_t b = pass1[p];
+                tensor.compute(bricks[b].region, s);
+                s.index.clear();
+                forBrickVoxels(bricks[b].region, [&](std::size_t n, const Coord& ijk) {
+                    if (onLattice(ijk)) s.index.push_back(std::uint32_t(n));
+                });
+                const float* J[6];
+                for (int c = 0; c < 6; ++c) J[c] = s.channel[c].data();
+                samples[p].resize(s.index.size());
+                detail::brickKernels().largestEigenvalues(J, s.index.data(), s.index.size(), samples[p].data());
+                if (all) kept[b] = s.channel;
+            }
+        });
+        std::vector<float> xi0;
+        for (auto& v : samples) {
+            xi0.insert(xi0.end(), v.begin(), v.end());
+            v = {};
+        }
+        // The q-quantile of the lattice's xi_0: the `implicitZeros` lattice voxels no brick reached
+        // come first in order.
+        auto quantile = [&](double q, std::uint64_t implicitZeros) -> double {
+            const std::uint64_t total = implicitZeros + xi0.size();
+            if (total == 0) return 0.0;
+            const std::uint64_t k = std::min<std::uint64_t>(total - 1, std::uint64_t(q * double(total - 1)));
+            if (k < implicitZeros) return 0.0;
+            auto nth = xi0.begin() + std::ptrdiff_t(k - implicitZeros);
+            std::nth_element(xi0.begin(), nth, xi0.end());
+            return *nth;
+        };
+        std::uint64_t zeros = latticeTotal > xi0.size() ? latticeTotal - xi0.size() : 0;
+        out.xiRef = quantile(opt.referencePercentile, zeros);
+        if (!(out.xiRef > 0) && !xi0.empty()) {
+            // The contours fill less than the box's top percentile (a small object in a large box):
+            // scale by the voxels the filters reached instead.
+            zeros = 0;
+            out.xiRef = quantile(opt.referencePercentile, zeros);
+        }
+        const double median = quantile(0.5, zeros);
+        out.threshold = std::min(0.95, std::max(opt.threshold, out.xiRef > 0 ? opt.noiseFactor * median / out.xiRef : 1.0));
+    }
+    if (!(out.xiRef > 0)) return out; // flat image: G = I
+
+    // Pass 2, per voxel G where some mu_i > 1 (brick_filters.h: metricVoxels).
+    // The gain multiplies the excess over the noise threshold, not the eigenvalue itself: what noise
+    // leaves below t stays Euclidean whatever the gain (a boosted raw xi_1 let noise through at high
+    // noise and tangled the model).
+    detail::MetricParams params;
+    params.xiRef = out.xiRef;
+    params.threshold = out.threshold;
+    params.span = opt.muMax - 1.0;
+    params.gain = opt.tangentialGain;
+    params.activeTolerance = opt.activeTolerance;
+    std::vector<BrickLeaves<Vec3fLeaf>> diag(bricks.size()), off(bricks.size());
+    std::vector<std::uint64_t> activeCount(bricks.size(), 0);
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, bricks.size(), 1), [&](const tbb::blocked_range<std::size_t>& rg) {
+        BrickScratch& s = scratch.local();
+        for (std::size_t b = rg.begin(); b != rg.end(); ++b) {
+            if (kept.empty()) {
+                tensor.compute(bricks[b].region, s);
+            } else {
+                s.channel = std::move(kept[b]);
+            }
+            const CoordBBox& region = bricks[b].region;
+            const Coord d = region.dim();
+            const std::size_t n = region.volume();
+            s.index.resize(n);
+            s.values.resize(6 * n);
+            const float* J[6];
+            for (int c = 0; c < 6; ++c) J[c] = s.channel[c].data();
+            const std::uint8_t* mask = nullptr;
+            if (levelSet) {
+                s.mask.assign(n, 0);
+                const Coord first(floorTo(region.min().x(), kLeafDim), floorTo(region.min().y(), kLeafDim), floorTo(region.min().z(), kLeafDim));
+                for (int lz = first.z(); lz <= region.max().z(); lz += kLeafDim)
+                    for (int ly = first.y(); ly <= region.max().y(); ly += kLeafDim)
+                        for (int lx = first.x(); lx <= region.max().x(); lx += kLeafDim) {
+                            const FloatLeaf* leaf = image.tree().probeConstLeaf(Coord(lx, ly, lz));
+                            if (!leaf) continue;
+                            for (auto it = leaf->cbeginValueOn(); it; ++it) {
+                                const Coord rel = it.getCoord() - region.min();
+                                if (region.isInside(it.getCoord()))
+                                    s.mask[(std::size_t(rel.z()) * d.y() + rel.y()) * d.x() + rel.x()] = 1;
+                            }
+                        }
+                mask = s.mask.data();
+            }
+            const std::size_t count = detail::brickKernels().metricVoxels(J, n, mask, params, s.index.data(), s.values.data());
+            for (std::size_t i = 0; i < count; ++i) {
+                const std::uint32_t v = s.index[i];
+                const std::uint32_t dx = std::uint32_t(d.x()), dy = std::uint32_t(d.y());
+                const Coord ijk = region.min() + Coord(int(v % dx), int(v / dx % dy), int(v / (dx * dy)));
+                const float* g = &s.values[6 * i];
+                diag[b].at(region, ijk, openvdb::Vec3f(1.0f)).setValueOn(ijk, openvdb::Vec3f(g[0], g[1], g[2]));
+                off[b].at(region, ijk, openvdb::Vec3f(0.0f)).setValueOn(ijk, openvdb::Vec3f(g[3], g[4], g[5]));
+            }
+            activeCount[b] = count;
+        }
+    });
+    for (std::size_t b = 0; b < bricks.size(); ++b) {
+        diag[b].moveInto(out.diag->tree());
+        off[b].moveInto(out.off->tree());
+        out.activeVoxels += activeCount[b];
+    }
+    return out;
 }
 
 } // namespace riemesh::vdb

@@ -209,7 +209,14 @@ PipelineResult meshVolume(Volume& volume, const PipelineOptions& options)
     };
     const auto metricStart = std::chrono::steady_clock::now();
     if (interrupted(PipelineStage::Borders)) return r;
+    auto lap = metricStart;
+    const auto split = [&](double& seconds) {
+        const auto now = std::chrono::steady_clock::now();
+        seconds = std::chrono::duration<double>(now - lap).count();
+        lap = now;
+    };
     r.borderVoxels = options.openBorders ? 0 : volume.closeBorders(iso, objectBrighter);
+    split(r.seconds.borders);
     if (options.riemannian) {
         if (interrupted(PipelineStage::Metric)) return r;
         // The tensor is computed on the image as read (its own sigma); the forces see it smoothed.
@@ -220,10 +227,13 @@ PipelineResult meshVolume(Volume& volume, const PipelineOptions& options)
         m.tangentialGain = options.tangentialGain;
         r.metric = volume.computeMetric(m);
     }
+    split(r.seconds.tensor);
     if (interrupted(PipelineStage::Smooth)) return r;
     volume.smooth(options.smooth);
+    split(r.seconds.smooth);
     if (interrupted(PipelineStage::Convert)) return r;
     const NanoVolume nano = volume.nano();
+    split(r.seconds.convert);
     r.seconds.metric = secondsSince(metricStart);
     if (interrupted(PipelineStage::Evolve)) return r;
 
@@ -335,6 +345,8 @@ std::string pipelineStatsJson(const PipelineResult& r, const PipelineRecord& rec
                     {"seconds", record.totalSeconds},
                     {"read_seconds", record.readSeconds + r.seconds.downsample},
                     {"metric_seconds", r.seconds.metric},
+                    {"stage_seconds", {{"borders", r.seconds.borders}, {"metric", r.seconds.tensor},
+                                       {"smooth", r.seconds.smooth}, {"convert", r.seconds.convert}}},
                     {"evolve_seconds", r.seconds.evolve},
                     {"write_seconds", record.writeSeconds},
                     {"splits", e.splits},

@@ -113,6 +113,9 @@ public:
     static NanoVolume read(const std::string& path);
     /// Same from bytes in memory.
     static NanoVolume fromBytes(const std::uint8_t* data, std::size_t size);
+    /// From grids built in this process (e.g. by riemesh::vdb::toNanoHandles), without a copy: the
+    /// grids are indexed as a file's would be, but their trees are trusted (not re-validated).
+    static NanoVolume fromHandles(std::vector<nanovdb::GridHandle<nanovdb::HostBuffer>>&& handles);
 
     NanoVolume();
     NanoVolume(NanoVolume&&) noexcept;

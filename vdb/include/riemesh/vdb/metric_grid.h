@@ -11,6 +11,12 @@
 // - t, the threshold below which a direction stays Euclidean, is max(threshold, noiseFactor *
 //   median(xi_0) / xi_ref): the median of xi_0 over the box measures the gradient energy of noise and
 //   flat texture, so far from contours G is exactly the identity.
+// Both quantiles are taken on a regular lattice of about a million voxels of the box; voxels beyond
+// the filters' reach of any leaf node (empty space, inside constant tiles) have J = 0 and count as
+// zeros without being visited. When the object is too small for the box's top percentile, xi_ref
+// is taken over the voxels the filters reach instead. A level set (grid class) is a signed distance
+// in world units, |grad| = 1 in its band: xi_ref = 1 and t = threshold (no noise to measure), and its
+// metric is kept to its narrow band (its active voxels), where its surface lies.
 // Then a flat contour gets muMax along its normal and 1 along its tangents (coarse along it, Table 1),
 // a sharp edge also along its curvature direction, a corner in all three.
 //
@@ -50,13 +56,12 @@ struct MetricGrids {
     double xiRef = 0;                   ///< rescaling reference (intensity^2 / world unit^2)
     double threshold = 0;               ///< t actually used
     std::uint64_t activeVoxels = 0;     ///< voxels where G != I
-    std::uint64_t totalVoxels = 0;      ///< voxels of the image box
+    std::uint64_t totalVoxels = 0;      ///< voxels of the image's active bounding box
 };
 
-/// Metric from a structure tensor (the grids of structureTensor()).
-MetricGrids metricFromStructureTensor(const StructureTensorGrids& tensor, const MetricOptions& options = {});
-
-/// Structure tensor and metric of `image` in one call.
+/// Structure tensor and metric of `image`: computed by bricks near the image's leaf nodes (sparse:
+/// time and memory follow the active voxels plus the filters' reach, never the bounding box),
+/// multithreaded, the same result for any number of threads.
 MetricGrids computeMetric(const openvdb::FloatGrid& image, const StructureTensorOptions& tensorOptions = {},
                           const MetricOptions& options = {});
 

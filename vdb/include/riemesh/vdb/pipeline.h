@@ -104,6 +104,7 @@ std::pair<double, bool> pipelineIso(const ImageInfo& image, const std::optional<
 struct PipelineTimings {
     double downsample = 0; ///< seconds
     double metric = 0;     ///< border closing, metric, smoothing, NanoVDB conversion (Borders to Convert)
+    double borders = 0, tensor = 0, smooth = 0, convert = 0; ///< the parts of `metric`
     double evolve = 0;     ///< the evolution (EvolutionStats::seconds)
     double analysis = 0;   ///< topology and self-intersection counts
 };

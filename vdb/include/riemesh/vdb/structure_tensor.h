@@ -2,9 +2,11 @@
 //
 //   J_{rho,sigma} = G_rho * (grad_sigma I)(grad_sigma I)^T
 //
-// computed on the active bounding box of the image (a dense block; sparse inputs such as narrow-band
-// level sets are filled with their inactive values), with separable Gaussian blurs and central
-// differences, multithreaded with TBB. sigma and rho are in voxels (index space). The gradient is
+// computed sparse: by bricks of 32^3 voxels within the filters' reach of the image's leaf nodes (each
+// gathered with a halo into a small dense block: inactive voxels and tiles give their values, and
+// samples beyond the active bounding box read its nearest voxel), with separable Gaussian blurs and
+// central differences, multithreaded with TBB; the result does not depend on the thread count.
+// Constant tiles and empty space cost nothing. sigma and rho are in voxels (index space). The gradient is
 // mapped to world space with the grid's transform (J_world = A^-T J_index A^-1 for the linear part A),
 // so J's eigenvectors are world-space directions even for anisotropic or oblique (NIfTI) transforms.
 #pragma once
@@ -18,14 +20,17 @@ struct StructureTensorOptions {
     double rho = 2.0;   ///< integration window of the gradient outer product (voxels)
 };
 
-/// The six components of J (world space, intensity^2 per world unit^2), on the image's active
-/// bounding box, every voxel active: diag = (Jxx, Jyy, Jzz), off = (Jxy, Jxz, Jyz).
+/// The six components of J (world space, intensity^2 per world unit^2), active on the voxels of the
+/// image's active bounding box within the filters' reach of a leaf node (J = 0 elsewhere):
+/// diag = (Jxx, Jyy, Jzz), off = (Jxy, Jxz, Jyz).
 struct StructureTensorGrids {
     openvdb::Vec3fGrid::Ptr diag, off;
 };
 
-/// Gaussian smoothing with standard deviation `sigma` (voxels; 0 = copy) over the active bounding box
-/// of `image`. The result has every voxel of that box active, the same transform, name and class.
+/// Gaussian smoothing with standard deviation `sigma` (voxels, <= 64; 0 = copy), sparse: the active
+/// voxels of leaf nodes take their smoothed values, and voxels of the active bounding box that the
+/// blur changes (within its reach of the active voxels) become active; constant active tiles keep
+/// their value. Same transform, name and class.
 openvdb::FloatGrid::Ptr gaussianSmooth(const openvdb::FloatGrid& image, double sigma);
 
 /// Structure tensor of `image`.
