@@ -296,11 +296,16 @@ PipelineResult meshVolume(Volume& volume, const PipelineOptions& options)
                                  " iterations; no output written (raise --delta or the cap)");
     }
 
-    const auto analysisStart = std::chrono::steady_clock::now();
+    analyseResult(r);
+    return r;
+}
+
+void analyseResult(PipelineResult& r)
+{
+    const auto start = std::chrono::steady_clock::now();
     r.topology = topologyOf(r.mesh);
     r.selfIntersections = findSelfIntersections(r.mesh).count(); // 0 for an embedded surface
-    r.seconds.analysis = secondsSince(analysisStart);
-    return r;
+    r.seconds.analysis = secondsSince(start);
 }
 
 std::string pipelineStatsJson(const PipelineResult& r, const PipelineRecord& record)

@@ -373,3 +373,55 @@ ReferenceError compareToReference(const Mesh& mesh, const std::string& path, con
 }
 
 } // namespace riemesh::vdb
+
+// ---- Additions for in-memory sources (volume_grids.h, volume_sources.h) ----------------------------
+
+#include "riemesh/vdb/volume_grids.h"
+
+#include <cmath>
+
+namespace riemesh::vdb {
+
+Volume Volume::copy() const
+{
+    Volume v;
+    *v.mImpl = *mImpl;
+    if (mImpl->image) v.mImpl->image = mImpl->image->deepCopy();
+    if (mImpl->diag) v.mImpl->diag = mImpl->diag->deepCopy();
+    if (mImpl->off) v.mImpl->off = mImpl->off->deepCopy();
+    return v;
+}
+
+Volume Volume::placement() const
+{
+    Volume v;
+    v.mImpl->info = mImpl->info;
+    if (mImpl->image) v.mImpl->image = mImpl->image->copyWithNewTree();
+    return v;
+}
+
+Volume VolumeGrids::fromImage(openvdb::FloatGrid::Ptr image, const std::string& format, const std::string& transformNote)
+{
+    if (!image) throw std::invalid_argument("no grid");
+    const std::string name = "grid '" + image->getName() + "'";
+    if (image->activeVoxelCount() == 0) throw std::invalid_argument(name + " is empty (no active voxels)");
+    if (const auto bad = countNonFinite(*image))
+        throw std::invalid_argument(name + " has " + std::to_string(bad) + " non-finite (NaN or infinite) voxel values");
+    if (!std::isfinite(image->background())) throw std::invalid_argument(name + " has a non-finite background value");
+    if (!image->transform().isLinear()) throw std::invalid_argument(name + " has a non-linear (frustum) transform");
+    Volume v;
+    auto& I = *v.mImpl;
+    I.info.format = format;
+    I.info.transformNote = transformNote;
+    I.image = std::move(image);
+    describe(I.info, *I.image);
+    if (I.info.dims[0] < 2 || I.info.dims[1] < 2 || I.info.dims[2] < 2)
+        throw std::invalid_argument(name + " is flat (" + std::to_string(I.info.dims[0]) + "x" +
+                                    std::to_string(I.info.dims[1]) + "x" + std::to_string(I.info.dims[2]) +
+                                    " voxels); need a 3D block");
+    return v;
+}
+
+openvdb::FloatGrid::ConstPtr VolumeGrids::image(const Volume& volume) { return volume.mImpl->image; }
+
+} // namespace riemesh::vdb

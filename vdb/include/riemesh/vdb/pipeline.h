@@ -142,6 +142,10 @@ struct PipelineResult {
 /// options.maxVertices.
 PipelineResult meshVolume(Volume& volume, const PipelineOptions& options);
 
+/// Fills result.topology, selfIntersections and seconds.analysis from result.mesh: meshVolume does it
+/// unless interrupted; call it to keep a mesh whose evolution was stopped early.
+void analyseResult(PipelineResult& result);
+
 /// What the caller adds to the statistics: its files, and the time it spent reading and writing.
 struct PipelineRecord {
     std::optional<std::string> input, output; ///< file paths (null in the JSON when absent)

@@ -97,7 +97,13 @@ public:
     /// The mesh as a level set "surface" with this image's transform, to a .vdb file, atomically.
     void writeSurfaceLevelSet(const std::string& path, const Mesh& mesh) const;
 
+    /// A deep copy (image and metric): meshVolume changes the volume it is given.
+    Volume copy() const;
+    /// The same info and transform without voxels: enough for writeSurfaceLevelSet, kept beside a mesh.
+    Volume placement() const;
+
 private:
+    friend struct VolumeGrids; // volume_grids.h: the OpenVDB grids behind a Volume
     struct Impl;
     std::unique_ptr<Impl> mImpl;
 };
