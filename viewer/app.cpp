@@ -176,6 +176,9 @@ void App::installVolume(std::unique_ptr<NanoVolume> volume, std::unique_ptr<Scal
     mEvolution.reset(); // holds references to the old image and metric
     mVolume = std::move(volume);
     mImage = std::move(image);
+    mCoarse.clear();
+    if (mVolume)
+        for (int l = mVolume->levelCount(); l >= 1; --l) mCoarse.push_back(std::make_unique<NanoImage>(mVolume->levelGrid(l)));
     mVolumeMetric = std::move(metric);
     mVolumeName = name;
 
@@ -277,6 +280,15 @@ EvolutionOptions App::evolutionOptions() const
     return o;
 }
 
+std::vector<EvolutionLevel> App::schedule() const
+{
+    std::vector<EvolutionLevel> levels;
+    const int n = int(mCoarse.size());
+    for (int i = 0; i < n; ++i) levels.push_back({mCoarse[i].get(), std::ldexp(1.0, n - i)});
+    levels.push_back({mImage.get(), 1.0});
+    return levels;
+}
+
 void App::reset()
 {
     if (!mImage) return;
@@ -290,7 +302,7 @@ void App::reset()
         mMesh = Mesh();
         return;
     }
-    mEvolution = std::make_unique<Evolution>(mMesh, *mImage, *mMetric, o);
+    mEvolution = std::make_unique<Evolution>(mMesh, schedule(), *mMetric, o);
     mIterationBase = 0;
     mIteration = 0;
     mComputeSeconds = 0;
@@ -660,6 +672,8 @@ void App::drawPanels()
     if (!evolving || nowSeconds() - mPanelAt >= 0.2) {
         mPanelAt = nowSeconds();
         mPanel.iteration = mIteration;
+        mPanel.level = mEvolution ? mEvolution->level() : 0;
+        mPanel.levels = mEvolution ? mEvolution->levels() : 1;
         mPanel.merges = mMerges;
         mPanel.cuts = mCuts;
         mPanel.topology = mTopology;
@@ -669,7 +683,10 @@ void App::drawPanels()
         mPanel.histogramMax = mHistogramMax;
     }
     const PanelFigures& p = mPanel;
-    ImGui::Text("iteration %d  (%s)", p.iteration, stateName());
+    if (p.levels > 1)
+        ImGui::Text("iteration %d  level %d of %d  (%s)", p.iteration, p.levels - p.level, p.levels, stateName());
+    else
+        ImGui::Text("iteration %d  (%s)", p.iteration, stateName());
     ImGui::Text("vertices %zu  faces %zu", p.topology.vertices, p.topology.faces);
     ImGui::Text("components %d  genus %d", p.topology.components, p.topology.genus);
     ImGui::Text("merges %d  cuts %d  compute %.2f s", p.merges, p.cuts, p.computeSeconds);
@@ -795,9 +812,10 @@ std::string App::stateJson() const
     for (char c : mVolumeName) name += (c == '"' || c == '\\') ? '_' : c;
     char buffer[512];
     std::snprintf(buffer, sizeof buffer,
-                  "{\"iteration\": %d, \"vertices\": %zu, \"components\": %d, \"genus\": %d, \"playing\": %s, "
+                  "{\"iteration\": %d, \"level\": %d, \"levels\": %d, \"vertices\": %zu, \"components\": %d, \"genus\": %d, \"playing\": %s, "
                   "\"state\": \"%s\", \"computeSeconds\": %.4f, \"frameMs\": %.2f, \"cpuMs\": %.2f, \"merges\": %d, \"cuts\": %d, \"volume\": \"%s\"}",
-                  mIteration, mTopology.vertices, mTopology.components, mTopology.genus, mPlaying ? "true" : "false",
+                  mIteration, mEvolution ? mEvolution->level() : 0, mEvolution ? mEvolution->levels() : 1,
+                  mTopology.vertices, mTopology.components, mTopology.genus, mPlaying ? "true" : "false",
                   stateName(), mComputeSeconds, mFrameInterval * 1e3, mLastFrameMs, mMerges, mCuts, name.c_str());
     return buffer;
 }

@@ -135,6 +135,8 @@ private:
     std::string mVolumeName;
     std::unique_ptr<NanoVolume> mVolume;
     std::unique_ptr<ScalarImage> mImage;
+    /// The coarse-to-fine levels the volume carries (riemesh_level_<l> grids), coarsest first.
+    std::vector<std::unique_ptr<ScalarImage>> mCoarse;
     std::unique_ptr<MetricField> mVolumeMetric;   ///< as read (nullptr: none in the file)
     std::unique_ptr<MetricField> mMetric;         ///< what the evolution uses (scaled / Euclidean)
     double mImageMin = 0, mImageMax = 1;
@@ -181,6 +183,7 @@ private:
     /// (see drawPanels()) and at every frame otherwise.
     struct PanelFigures {
         int iteration = 0, merges = 0, cuts = 0;
+        int level = 0, levels = 1; ///< coarse-to-fine level being evolved (0: the finest) of levels
         MeshTopology topology;
         double computeSeconds = 0;
         int energyCount = 0; ///< entries of mEnergyLog plotted
@@ -193,6 +196,8 @@ private:
                        std::unique_ptr<MetricField> metric, const std::string& name);
     void rebuildMetric();
     EvolutionOptions evolutionOptions() const;
+    /// The schedule: the coarse levels, then the image itself.
+    std::vector<EvolutionLevel> schedule() const;
     void advance(double budgetMs);
     void onStopped();
     void homeCamera();

@@ -21,6 +21,7 @@
 #include <cctype>
 #include <cmath>
 #include <filesystem>
+#include <fstream>
 #include <limits>
 #include <mutex>
 #include <optional>
@@ -309,6 +310,28 @@ void writeNvdb(const std::string& path, const openvdb::FloatGrid& image, const o
     }
     writeFileAtomically(path, [&](const std::string& temp) {
         nanovdb::io::writeGrids<nanovdb::HostBuffer, std::vector>(temp, handles);
+    });
+}
+
+void writeNvdb(const std::string& path, const NanoVolume& volume, double iso)
+{
+    std::optional<nanovdb::GridHandle<nanovdb::HostBuffer>> isoHandle;
+    if (std::isfinite(iso)) {
+        openvdb::FloatGrid isoGrid{float(iso)};
+        isoGrid.setName(riemesh::kIsoGrid);
+        isoGrid.tree().setValueOn(openvdb::Coord(0), float(iso));
+        isoHandle = toNano(isoGrid);
+    }
+    writeFileAtomically(path, [&](const std::string& temp) {
+        // One segment per grid (a NanoVDB file may hold several), without copying the grids.
+        std::ofstream out(temp, std::ios::binary);
+        for (const auto& h : volume.handles()) {
+            if (const auto* meta = h.gridMetaData(); meta && std::string(meta->shortGridName()) == riemesh::kIsoGrid) continue;
+            nanovdb::io::writeGrid(out, h);
+        }
+        if (isoHandle) nanovdb::io::writeGrid(out, *isoHandle);
+        out.close();
+        if (!out) throw std::runtime_error("'" + path + "': write failed");
     });
 }
 

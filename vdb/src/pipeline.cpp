@@ -245,7 +245,8 @@ PipelineResult meshVolume(Volume& volume, const PipelineOptions& options)
     volume.buildLevels(r.levels, objectBrighter);
     split(r.seconds.levels);
     if (interrupted(PipelineStage::Convert)) return r;
-    const NanoVolume nano = volume.nano();
+    const std::shared_ptr<const NanoVolume> nanoVolume = volume.releaseToNano();
+    const NanoVolume& nano = *nanoVolume;
     split(r.seconds.convert);
     r.seconds.metric = secondsSince(metricStart);
     if (interrupted(PipelineStage::Evolve)) return r;

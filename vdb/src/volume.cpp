@@ -9,6 +9,8 @@
 #include "riemesh/vdb/phantom.h"
 #include "riemesh/vdb/structure_tensor.h"
 
+#include <nanovdb/util/NanoToOpenVDB.h>
+
 #include <tbb/global_control.h>
 #include <tbb/info.h>
 
@@ -66,6 +68,13 @@ struct Volume::Impl {
     openvdb::Vec3fGrid::Ptr diag, off;
     double muMax = 1.0;
     FloatGrids levels; ///< coarse images for the schedule, level 1 first
+    /// After releaseToNano(): the grids in NanoVDB form; `image` is then an empty grid that keeps the
+    /// transform, name and class, and diag, off and levels are gone.
+    std::shared_ptr<const NanoVolume> released;
+    void checkVoxels(const char* what) const
+    {
+        if (released) throw std::logic_error(std::string("Volume::") + what + ": the voxels were released to NanoVDB");
+    }
 };
 
 Volume::Volume() : mImpl(std::make_unique<Impl>()) {}
@@ -149,6 +158,7 @@ Volume Volume::read(const std::string& path, const std::string& gridName, std::u
 
 std::uint64_t Volume::closeBorders(double iso, bool objectBrighter)
 {
+    mImpl->checkVoxels("closeBorders");
     auto& grid = *mImpl->image;
     const openvdb::CoordBBox box = grid.evalActiveVoxelBoundingBox();
     if (box.empty()) return 0;
@@ -243,6 +253,7 @@ std::uint64_t Volume::closeBorders(double iso, bool objectBrighter)
 
 void Volume::smooth(double sigmaVoxels)
 {
+    mImpl->checkVoxels("smooth");
     if (sigmaVoxels <= 0) return;
     mImpl->image = gaussianSmooth(*mImpl->image, sigmaVoxels);
     mImpl->levels.clear();
@@ -250,6 +261,7 @@ void Volume::smooth(double sigmaVoxels)
 
 void Volume::buildLevels(int levels, bool objectBrighter)
 {
+    mImpl->checkVoxels("buildLevels");
     mImpl->levels = coarseLevels(*mImpl->image, levels, objectBrighter);
 }
 
@@ -257,6 +269,7 @@ int Volume::levelCount() const { return int(mImpl->levels.size()); }
 
 VolumeMetricStats Volume::computeMetric(const VolumeMetricOptions& options)
 {
+    mImpl->checkVoxels("computeMetric");
     const auto start = std::chrono::steady_clock::now();
     StructureTensorOptions t;
     t.sigma = options.sigma;
@@ -277,27 +290,67 @@ VolumeMetricStats Volume::computeMetric(const VolumeMetricOptions& options)
     return s;
 }
 
-bool Volume::hasMetric() const { return bool(mImpl->diag); }
+bool Volume::hasMetric() const { return mImpl->released ? mImpl->released->metricDiag() != nullptr : bool(mImpl->diag); }
 double Volume::metricMaxEigenvalue() const { return mImpl->muMax; }
 
 NanoVolume Volume::nano() const
 {
+    mImpl->checkVoxels("nano");
     return toNanoVolume(*mImpl->image, mImpl->diag.get(), mImpl->off.get(), mImpl->levels);
+}
+
+std::shared_ptr<const NanoVolume> Volume::releaseToNano()
+{
+    auto& I = *mImpl;
+    if (I.released) return I.released;
+    std::vector<nanovdb::GridHandle<nanovdb::HostBuffer>> handles;
+    handles.push_back(toNano(*I.image));
+    I.image = I.image->copyWithNewTree(); // the transform, name, class and metadata, no voxels
+    if (I.diag && I.off) {
+        handles.push_back(toNano(*I.diag));
+        I.diag.reset();
+        handles.push_back(toNano(*I.off));
+        I.off.reset();
+    }
+    for (auto& level : I.levels) {
+        handles.push_back(toNano(*level));
+        level.reset();
+    }
+    I.levels.clear();
+    I.released = std::make_shared<const NanoVolume>(NanoVolume::fromHandles(std::move(handles)));
+    return I.released;
 }
 
 void Volume::writeMetric(const std::string& path) const
 {
     if (!hasMetric()) throw std::runtime_error("no metric to write");
+    if (const auto& nano = mImpl->released) {
+        openvdb::Vec3fGrid::Ptr diag = nanovdb::nanoToOpenVDB(*nano->metricDiag());
+        openvdb::Vec3fGrid::Ptr off = nanovdb::nanoToOpenVDB(*nano->metricOff());
+        diag->setName(kMetricDiagGrid);
+        off->setName(kMetricOffGrid);
+        for (auto* g : {&diag, &off}) {
+            (*g)->insertMeta(kMuMaxMetadata, openvdb::DoubleMetadata(mImpl->muMax));
+            (*g)->setVectorType(openvdb::VEC_INVARIANT);
+        }
+        writeVdb(path, {diag, off});
+        return;
+    }
     writeVdb(path, {mImpl->diag, mImpl->off});
 }
 
 void Volume::exportNanoVDB(const std::string& path, double iso) const
 {
+    if (const auto& nano = mImpl->released) {
+        writeNvdb(path, *nano, iso);
+        return;
+    }
     writeNvdb(path, *mImpl->image, mImpl->diag.get(), mImpl->off.get(), iso, mImpl->levels);
 }
 
 void Volume::downsample(int factor)
 {
+    mImpl->checkVoxels("downsample");
     if (factor < 1) throw std::invalid_argument("downsample: factor must be >= 1");
     if (factor == 1) return;
     const auto& in = *mImpl->image;
@@ -384,6 +437,7 @@ namespace riemesh::vdb {
 
 Volume Volume::copy() const
 {
+    mImpl->checkVoxels("copy");
     Volume v;
     *v.mImpl = *mImpl;
     if (mImpl->image) v.mImpl->image = mImpl->image->deepCopy();

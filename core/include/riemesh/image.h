@@ -140,6 +140,8 @@ public:
     /// to levelCount(); nullptr outside.
     int levelCount() const { return int(mLevels.size()); }
     const nanovdb::FloatGrid* levelGrid(int level) const;
+    /// Every grid, in order (what NanoVolume::read would find in a file).
+    const std::vector<nanovdb::GridHandle<nanovdb::HostBuffer>>& handles() const { return mHandles; }
     /// The isovalue stored with the image (kIsoGrid), if any.
     bool hasIso() const { return mIsoGrid >= 0; }
     double iso() const;

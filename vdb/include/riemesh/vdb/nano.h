@@ -38,4 +38,7 @@ void writeNvdb(const std::string& path, const openvdb::FloatGrid& image,
                const openvdb::Vec3fGrid* metricDiag = nullptr, const openvdb::Vec3fGrid* metricOff = nullptr,
                double iso = std::numeric_limits<double>::quiet_NaN(), const FloatGrids& levels = {});
 
+/// Writes the grids of `volume` (and a finite `iso`, as above) to a .nvdb file atomically.
+void writeNvdb(const std::string& path, const NanoVolume& volume, double iso = std::numeric_limits<double>::quiet_NaN());
+
 } // namespace riemesh::vdb

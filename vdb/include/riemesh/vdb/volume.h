@@ -81,8 +81,14 @@ public:
     bool hasMetric() const;
     double metricMaxEigenvalue() const;
 
-    /// The image and metric (when present) as NanoVDB grids for the core.
+    /// The image, metric (when present) and coarse levels as NanoVDB grids for the core.
     NanoVolume nano() const;
+    /// The same, converting one grid at a time and freeing its OpenVDB form right after, so that the
+    /// peak memory holds one grid twice, not all of them (what meshVolume does). The volume then keeps
+    /// the NanoVDB copy (returned), from which writeMetric, exportNanoVDB, writeSurfaceLevelSet,
+    /// placement and info still work; the operations on voxels (smooth, computeMetric, closeBorders,
+    /// buildLevels, downsample, nano) throw std::logic_error. Calling it again returns the same copy.
+    std::shared_ptr<const NanoVolume> releaseToNano();
 
     /// metric_diag + metric_off to a .vdb file (for Houdini / vdb_view), atomically. Needs a metric.
     void writeMetric(const std::string& path) const;
