@@ -4,6 +4,8 @@
 #include "riemesh/vdb/phantom.h"
 #include "riemesh/vdb/structure_tensor.h"
 
+#include <openvdb/tools/Interpolation.h>
+
 #include <Eigen/Eigenvalues>
 
 #include <doctest/doctest.h>
@@ -41,10 +43,13 @@ Eigen::Matrix3d tensorAt(const StructureTensorGrids& t, const Coord& c)
     return J;
 }
 
-Eigen::Matrix3d metricAt(const MetricGrids& m, const Coord& c)
+/// G at the centre of image voxel `c` (index space of `image`), interpolated from the metric's cells
+/// as the core does (trilinear, the cells' own transform).
+Eigen::Matrix3d metricAt(const MetricGrids& m, const openvdb::GridBase& image, const Coord& c)
 {
-    const auto d = m.diag->getConstAccessor().getValue(c);
-    const auto o = m.off->getConstAccessor().getValue(c);
+    const openvdb::Vec3d world = image.transform().indexToWorld(c);
+    const auto d = openvdb::tools::BoxSampler::sample(m.diag->tree(), m.diag->transform().worldToIndex(world));
+    const auto o = openvdb::tools::BoxSampler::sample(m.off->tree(), m.off->transform().worldToIndex(world));
     Eigen::Matrix3d G;
     G << d[0], o[0], o[1], o[0], d[1], o[2], o[1], o[2], d[2];
     return G;
@@ -122,7 +127,9 @@ TEST_CASE("metric: eigenvalues in [1, muMax], muMax along contour normals, ident
     CHECK(m.diag->background() == openvdb::Vec3f(1.0f));
     CHECK(m.off->background() == openvdb::Vec3f(0.0f));
     CHECK(m.diag->metaValue<double>(kMuMaxMetadata) == 9.0);
-    CHECK(m.diag->transform() == p.density->transform());
+    // The metric's cells are 2x2x2 voxels: cell (0, 0, 0) sits between voxels 0 and 1.
+    CHECK(m.diag->voxelSize() == p.density->voxelSize() * 2.0);
+    CHECK(m.diag->indexToWorld(Coord(0)) == p.density->indexToWorld(openvdb::Vec3d(0.5)));
     CHECK(m.activeVoxels == m.diag->activeVoxelCount());
     // Sparse: active only near the contours.
     CHECK(m.activeVoxels > 0);
@@ -130,7 +137,11 @@ TEST_CASE("metric: eigenvalues in [1, muMax], muMax along contour normals, ident
 
     double maxMu = 0;
     for (auto it = m.diag->cbeginValueOn(); it; ++it) {
-        Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> es(metricAt(m, it.getCoord()));
+        const auto d = *it;
+        const auto off = m.off->getConstAccessor().getValue(it.getCoord());
+        Eigen::Matrix3d cell;
+        cell << d[0], off[0], off[1], off[0], d[1], off[2], off[1], off[2], d[2];
+        Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> es(cell);
         CHECK(es.eigenvalues()[0] >= 1.0 - 1e-4);
         CHECK(es.eigenvalues()[2] <= 9.0 + 1e-3);
         maxMu = std::max(maxMu, es.eigenvalues()[2]);
@@ -139,12 +150,12 @@ TEST_CASE("metric: eigenvalues in [1, muMax], muMax along contour normals, ident
     // Far from every contour (box corner, cavity centre, deep inside the wall) G = I and inactive.
     const int mid = (o.size - 1) / 2;
     for (const Coord c : {Coord(2, 2, 2), Coord(mid, mid, mid), Coord(o.size - 3, 2, o.size - 3)}) {
-        CHECK_FALSE(m.diag->tree().isValueOn(c));
-        CHECK(metricAt(m, c).isApprox(Eigen::Matrix3d::Identity()));
+        CHECK_FALSE(m.diag->tree().isValueOn(c >> 1));
+        CHECK(metricAt(m, *p.density, c).isApprox(Eigen::Matrix3d::Identity()));
     }
     // On a flat face: muMax along the face normal (x), small along the face.
     const Coord onFace(int(std::lround(0.5 * (o.size - 1) + 0.3 * o.size)), mid - 6, mid - 6);
-    const Eigen::Matrix3d G = metricAt(m, onFace);
+    const Eigen::Matrix3d G = metricAt(m, *p.density, onFace);
     CHECK(G(0, 0) > 5.0);
     CHECK(G(1, 1) < 2.5);
     CHECK(G(2, 2) < 2.5);
@@ -200,13 +211,15 @@ TEST_CASE("metric: the edge gain refines across a cube's edges and leaves its fa
     auto tangential = [&](double gain, const Coord& at) {
         MetricOptions o;
         o.tangentialGain = gain;
-        Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> es(metricAt(computeMetric(*cube, {1.0, 2.0}, o), at));
+        Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> es(metricAt(computeMetric(*cube, {1.0, 2.0}, o), *cube, at));
         return es.eigenvalues()[1]; // the middle eigenvalue: across the edge, tangent to both faces
     };
     const double plain = tangential(1.0, edge), boosted = tangential(4.0, edge);
     MESSAGE("mu across the edge: gain 1 -> " << plain << ", gain 4 -> " << boosted);
     CHECK(boosted > 3.0);            // edges across it ~2x shorter than on a face (muMax 9)
-    CHECK(boosted > 2.0 * plain);
+    // The cells' metric (2x2x2 voxels) is a little smoother than a voxel one, which raises the plain
+    // value near the edge (1.86 vs 3.34 boosted; a per-voxel metric gave more than 2x).
+    CHECK(boosted > 1.6 * plain);
     CHECK(tangential(4.0, face) < 1.5); // flat face: tangential directions stay ~Euclidean
     CHECK_THROWS(tangential(0.5, edge));
 }

@@ -43,6 +43,9 @@ struct BrickKernels {
     /// tensorProducts followed by blurX with the 2r+1 taps w on each channel, fused row by row (the
     /// products never leave the cache): six blocks of (nx - 2 - 2r) x (ny - 2) x (nz - 2).
     void (*tensorBlurX)(const float* in, BlockDims d, const double* toWorld, const float* w, int r, float* const out[6]);
+    /// tensorProducts averaged over 2x2x2 cells of the gradient domain (whose edges must be even):
+    /// six blocks of ((nx - 2) / 2) x ((ny - 2) / 2) x ((nz - 2) / 2).
+    void (*tensorProductsHalf)(const float* in, BlockDims d, const double* toWorld, float* const out[6]);
     /// The metric of n voxels (metric_grid.h) from their tensor channels: for each voxel whose G
     /// differs from the identity, appends its index to `index` and G's six entries (xx yy zz xy xz
     /// yz) to `g` (room for n of each); returns how many.

@@ -173,6 +173,34 @@ void tensorProducts(const float* in, BlockDims d, const double* m, float* const 
 }
 
 
+/// The tensor products averaged over 2x2x2 cells: out[c] has ((nx - 2) / 2)^3-style dimensions
+/// (each axis of the gradient domain halved), cell (i, j, k) the mean of the gradient-domain voxels
+/// 2(i, j, k) + {0, 1}^3.
+void tensorProductsHalf(const float* in, BlockDims d, const double* toWorld, float* const out[6])
+{
+    float m[9];
+    for (int i = 0; i < 9; ++i) m[i] = float(toWorld[i]);
+    const int gx = d.nx - 2, hx = gx / 2, hy = (d.ny - 2) / 2, hz = (d.nz - 2) / 2;
+    const std::size_t sy = std::size_t(d.nx), sz = std::size_t(d.nx) * d.ny;
+    std::vector<float> buffer(6 * std::size_t(gx));
+    float* rows[6];
+    for (int c = 0; c < 6; ++c) rows[c] = buffer.data() + c * std::size_t(gx);
+    std::size_t o = 0;
+    for (int k = 0; k < hz; ++k)
+        for (int j = 0; j < hy; ++j, o += std::size_t(hx)) {
+            for (int c = 0; c < 6; ++c) std::fill_n(out[c] + o, hx, 0.0f);
+            for (int b = 0; b < 2; ++b)
+                for (int a = 0; a < 2; ++a) {
+                    productRow(in + (2 * k + b + 1) * sz + (2 * j + a + 1) * sy + 1, sy, sz, gx, m, rows);
+                    for (int c = 0; c < 6; ++c) {
+                        float* __restrict dst = out[c] + o;
+                        const float* __restrict src = rows[c];
+                        for (int i = 0; i < hx; ++i) dst[i] += 0.125f * (src[2 * i] + src[2 * i + 1]);
+                    }
+                }
+        }
+}
+
 template<int R>
 inline void convolveRowFixed(const float* __restrict src, int n, const float* __restrict wt, float* __restrict dst)
 {
@@ -260,6 +288,6 @@ void largestEigenvalues(const float* const J[6], const std::uint32_t* index, std
 
 #define RIEMESH_STR2(x) #x
 #define RIEMESH_STR(x) RIEMESH_STR2(x)
-extern const BrickKernels kKernels{blurX, blurY, blurZ, tensorProducts, tensorBlurX, metricVoxels, largestEigenvalues, RIEMESH_STR(RIEMESH_KERNEL_NS)};
+extern const BrickKernels kKernels{blurX, blurY, blurZ, tensorProducts, tensorBlurX, tensorProductsHalf, metricVoxels, largestEigenvalues, RIEMESH_STR(RIEMESH_KERNEL_NS)};
 
 } // namespace riemesh::vdb::detail::RIEMESH_KERNEL_NS

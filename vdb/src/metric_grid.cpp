@@ -96,12 +96,13 @@ private:
 /// The bricks of `lattice` with a voxel within `reach` voxels of a leaf node of `tree`, sorted, so
 /// that the order (and every result assembled in it) is the same on any run.
 template<typename TreeT>
-std::vector<Brick> bricksNearLeaves(const TreeT& tree, int reach, const BrickLattice& lattice)
+std::vector<Brick> bricksNearLeaves(const TreeT& tree, int reach, const BrickLattice& lattice, int shift = 0)
 {
     const CoordBBox& clip = lattice.clip();
     std::vector<Coord> cells;
     for (auto it = tree.cbeginLeaf(); it; ++it) {
-        CoordBBox box(it->origin().offsetBy(-reach), it->origin().offsetBy(kLeafDim - 1 + reach));
+        // In the lattice's coordinates: voxels, or cells of 2^shift voxels.
+        CoordBBox box(it->origin().offsetBy(-reach) >> shift, it->origin().offsetBy(kLeafDim - 1 + reach) >> shift);
         box.intersect(clip);
         if (box.empty()) continue;
         Coord lo, hi;
@@ -126,13 +127,14 @@ std::vector<Brick> bricksNearLeaves(const TreeT& tree, int reach, const BrickLat
 /// The brick lattice over `clip` whose bricks near the leaves of `tree` gather the fewest voxels
 /// with a halo of `halo` (the filters' work is about proportional to that), and those bricks.
 template<typename TreeT>
-std::pair<BrickLattice, std::vector<Brick>> cheapestBricks(const TreeT& tree, int reach, int halo, const CoordBBox& clip)
+std::pair<BrickLattice, std::vector<Brick>> cheapestBricks(const TreeT& tree, int reach, int halo, const CoordBBox& clip,
+                                                           int shift = 0)
 {
     std::optional<std::pair<BrickLattice, std::vector<Brick>>> best;
     double bestCost = 0;
     for (const int size : kBrickSizes) {
         BrickLattice lattice(clip, size);
-        std::vector<Brick> bricks = bricksNearLeaves(tree, reach, lattice);
+        std::vector<Brick> bricks = bricksNearLeaves(tree, reach, lattice, shift);
         double cost = 0;
         for (const Brick& b : bricks) {
             const Coord d = b.region.dim();
@@ -239,12 +241,24 @@ struct BrickScratch {
 /// over the region.
 class TensorBricks {
 public:
-    TensorBricks(const openvdb::FloatGrid& image, const StructureTensorOptions& opt, const CoordBBox& clamp)
-        : mTree(image.tree()), mClamp(clamp)
+    /// With `half`, regions are in cells of 2x2x2 voxels (cell C covers voxels 2C + {0, 1}^3) and J
+    /// is computed there: the products of the gradient averaged over each cell, then blurred on the
+    /// cells with the Gaussian that gives the same variance in all (rho^2 = 4 rho_cell^2 + 1/4):
+    /// J is a smooth field (blurred by rho), so a cell grid holds it with little loss, for an eighth
+    /// of the blur's work, of the eigensolves and of the metric's memory.
+    TensorBricks(const openvdb::FloatGrid& image, const StructureTensorOptions& opt, const CoordBBox& clamp, bool half = false)
+        : mTree(image.tree()), mClamp(clamp), mHalf(half)
     {
         if (opt.sigma > 0) mImageTaps = detail::gaussianTaps(opt.sigma);
-        if (opt.rho > 0) mTensorTaps = detail::gaussianTaps(opt.rho);
-        mHalo = int(mImageTaps.size() / 2) + 1 + int(mTensorTaps.size() / 2);
+        if (half) {
+            const double cellRho = 0.5 * std::sqrt(std::max(opt.rho * opt.rho - 0.25, 0.0));
+            if (cellRho > 0.1) mTensorTaps = detail::gaussianTaps(cellRho);
+            // In voxels: the cells' blur, the cell itself, the gradient and the image's blur.
+            mHalo = 2 * int(mTensorTaps.size() / 2) + 1 + 1 + int(mImageTaps.size() / 2);
+        } else {
+            if (opt.rho > 0) mTensorTaps = detail::gaussianTaps(opt.rho);
+            mHalo = int(mImageTaps.size() / 2) + 1 + int(mTensorTaps.size() / 2);
+        }
         // Index-space gradient -> world-space gradient: g_w = A^-T g_i (the inverse Jacobian transpose).
         const auto map = image.transform().baseMap();
         for (int a = 0; a < 3; ++a) {
@@ -258,6 +272,7 @@ public:
 
     void compute(const CoordBBox& region, BrickScratch& s) const
     {
+        if (mHalf) return computeCells(region, s);
         const auto& k = detail::brickKernels();
         BlockDims d = grown(region, mHalo);
         s.block.resize(d.size());
@@ -288,9 +303,36 @@ public:
 private:
     const openvdb::FloatTree& mTree;
     CoordBBox mClamp;
+    bool mHalf = false;
     std::vector<float> mImageTaps, mTensorTaps;
     int mHalo = 1;
     std::array<double, 9> mToWorld{};
+
+    void computeCells(const CoordBBox& cells, BrickScratch& s) const
+    {
+        const auto& k = detail::brickKernels();
+        const int rc = int(mTensorTaps.size() / 2), ri = int(mImageTaps.size() / 2);
+        // The voxels whose products the cells (grown by the cells' blur) average, then grown by the
+        // gradient's and the image blur's reach.
+        const CoordBBox grownCells = cells.expandBy(rc);
+        const CoordBBox voxels(grownCells.min() << 1, (grownCells.max() << 1).offsetBy(1));
+        BlockDims d = grown(voxels, 1 + ri);
+        s.block.resize(d.size());
+        gather(mTree, voxels.expandBy(1 + ri), mClamp, s.block.data());
+        if (!mImageTaps.empty()) d = blur3(s.block, d, mImageTaps, s.scratch);
+        const Coord gc = grownCells.dim();
+        float* out[6];
+        for (int c = 0; c < 6; ++c) {
+            s.channel[c].resize(std::size_t(gc.x()) * gc.y() * gc.z());
+            out[c] = s.channel[c].data();
+        }
+        k.tensorProductsHalf(s.block.data(), d, mToWorld.data(), out);
+        if (mTensorTaps.empty()) return;
+        for (auto& ch : s.channel) {
+            std::vector<float>& block = ch;
+            blur3(block, BlockDims{gc.x(), gc.y(), gc.z()}, mTensorTaps, s.scratch);
+        }
+    }
 };
 
 /// Calls f(n, ijk) for the voxels of `region` (n: index in the region, x fastest).
@@ -470,20 +512,26 @@ MetricGrids computeMetric(const openvdb::FloatGrid& image, const StructureTensor
     if (!(opt.tangentialGain >= 1.0) || !std::isfinite(opt.tangentialGain))
         throw std::invalid_argument("metric: tangentialGain must be >= 1");
     initialize();
-    const CoordBBox box = activeBox(image);
+    const CoordBBox voxelBox = activeBox(image);
+    // The metric lives on cells of 2x2x2 voxels (TensorBricks): cell C covers voxels 2C + {0, 1}^3
+    // and sits at their centre.
+    const CoordBBox box(voxelBox.min() >> 1, voxelBox.max() >> 1);
+    auto cellTransform = image.transform().copy();
+    cellTransform->preTranslate(openvdb::Vec3d(0.5));
+    cellTransform->preScale(2.0);
 
     MetricGrids out;
     out.muMax = opt.muMax;
     out.totalVoxels = box.volume();
-    out.diag = metricGrid(riemesh::kMetricDiagGrid, openvdb::Vec3f(1.0f), image.transform(), opt.muMax);
-    out.off = metricGrid(riemesh::kMetricOffGrid, openvdb::Vec3f(0.0f), image.transform(), opt.muMax);
+    out.diag = metricGrid(riemesh::kMetricDiagGrid, openvdb::Vec3f(1.0f), *cellTransform, opt.muMax);
+    out.off = metricGrid(riemesh::kMetricOffGrid, openvdb::Vec3f(0.0f), *cellTransform, opt.muMax);
     if (opt.muMax == 1.0) return out; // Euclidean request: G = I
 
-    const TensorBricks tensor(image, tensorOptions, box);
-    // A level set's metric lives in its narrow band (the active voxels: where its surface can be);
-    // other images' wherever the filters reach from their leaf nodes.
+    const TensorBricks tensor(image, tensorOptions, voxelBox, /*half=*/true);
+    // A level set's metric lives in its narrow band (the cells of its active voxels: where its surface
+    // can be); other images' wherever the filters reach from their leaf nodes.
     const bool levelSet = image.getGridClass() == openvdb::GRID_LEVEL_SET;
-    const auto [lattice, bricks] = cheapestBricks(image.tree(), levelSet ? 0 : tensor.halo(), tensor.halo(), box);
+    const auto [lattice, bricks] = cheapestBricks(image.tree(), levelSet ? 0 : tensor.halo(), (tensor.halo() + 1) / 2, box, 1);
     tbb::enumerable_thread_specific<BrickScratch> scratch;
 
     // The tensor of the bricks pass 1 computed, kept for pass 2 when the image is small.
@@ -605,18 +653,20 @@ MetricGrids computeMetric(const openvdb::FloatGrid& image, const StructureTensor
             const float* J[6];
             for (int c = 0; c < 6; ++c) J[c] = s.channel[c].data();
             const std::uint8_t* mask = nullptr;
-            if (levelSet) {
+            if (levelSet) { // the cells with an active voxel of the band
                 s.mask.assign(n, 0);
-                const Coord first(floorTo(region.min().x(), kLeafDim), floorTo(region.min().y(), kLeafDim), floorTo(region.min().z(), kLeafDim));
-                for (int lz = first.z(); lz <= region.max().z(); lz += kLeafDim)
-                    for (int ly = first.y(); ly <= region.max().y(); ly += kLeafDim)
-                        for (int lx = first.x(); lx <= region.max().x(); lx += kLeafDim) {
+                const CoordBBox voxels(region.min() << 1, (region.max() << 1).offsetBy(1));
+                const Coord first(floorTo(voxels.min().x(), kLeafDim), floorTo(voxels.min().y(), kLeafDim), floorTo(voxels.min().z(), kLeafDim));
+                for (int lz = first.z(); lz <= voxels.max().z(); lz += kLeafDim)
+                    for (int ly = first.y(); ly <= voxels.max().y(); ly += kLeafDim)
+                        for (int lx = first.x(); lx <= voxels.max().x(); lx += kLeafDim) {
                             const FloatLeaf* leaf = image.tree().probeConstLeaf(Coord(lx, ly, lz));
                             if (!leaf) continue;
                             for (auto it = leaf->cbeginValueOn(); it; ++it) {
-                                const Coord rel = it.getCoord() - region.min();
-                                if (region.isInside(it.getCoord()))
-                                    s.mask[(std::size_t(rel.z()) * d.y() + rel.y()) * d.x() + rel.x()] = 1;
+                                const Coord cell = it.getCoord() >> 1;
+                                if (!region.isInside(cell)) continue;
+                                const Coord rel = cell - region.min();
+                                s.mask[(std::size_t(rel.z()) * d.y() + rel.y()) * d.x() + rel.x()] = 1;
                             }
                         }
                 mask = s.mask.data();

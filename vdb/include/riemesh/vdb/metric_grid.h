@@ -20,8 +20,10 @@
 // Then a flat contour gets muMax along its normal and 1 along its tangents (coarse along it, Table 1),
 // a sharp edge also along its curvature direction, a corner in all three.
 //
-// The metric is stored sparse: two Vec3f grids with the image's transform, active only where G
-// differs from the identity, "metric_diag" = (gxx, gyy, gzz) with background (1,1,1) and
+// The metric is stored sparse, on cells of 2x2x2 voxels (J is blurred by rho, a smooth field: the
+// tensor products are averaged over each cell and blurred there, for an eighth of the work and
+// memory): two Vec3f grids with the image's transform scaled by 2 (cell C at the centre of voxels
+// 2C + {0, 1}^3), active only where G differs from the identity, "metric_diag" = (gxx, gyy, gzz) with background (1,1,1) and
 // "metric_off" = (gxy, gxz, gyz) with background (0,0,0); trilinear interpolation between them stays
 // SPD with eigenvalues in [1, muMax] (a convex combination of such matrices). Each grid carries the
 // metadata "riemesh:mu_max" (double).
@@ -55,8 +57,8 @@ struct MetricGrids {
     double muMax = 1.0;                 ///< bound on the eigenvalues (the option's muMax)
     double xiRef = 0;                   ///< rescaling reference (intensity^2 / world unit^2)
     double threshold = 0;               ///< t actually used
-    std::uint64_t activeVoxels = 0;     ///< voxels where G != I
-    std::uint64_t totalVoxels = 0;      ///< voxels of the image's active bounding box
+    std::uint64_t activeVoxels = 0;     ///< cells (2x2x2 voxels) where G != I
+    std::uint64_t totalVoxels = 0;      ///< cells of the image's active bounding box
 };
 
 /// Structure tensor and metric of `image`: computed by bricks near the image's leaf nodes (sparse:
