@@ -7,6 +7,7 @@
 #include "riemesh/vdb/volume.h"
 
 #include <openvdb/io/File.h>
+#include <openvdb/tree/LeafManager.h>
 #include <openvdb/tools/MeshToVolume.h>
 #include <openvdb/tools/Interpolation.h>
 
@@ -47,13 +48,48 @@ std::string gridClassName(const openvdb::GridBase& grid)
     }
 }
 
-std::uint64_t countNonFinite(const openvdb::FloatGrid& grid)
+ValueStats valueStats(const openvdb::FloatGrid& grid)
 {
-    std::uint64_t count = 0;
-    for (auto it = grid.tree().cbeginValueOn(); it; ++it)
-        if (!std::isfinite(*it)) ++count;
-    return count;
+    // Leaf nodes in parallel (the bulk of any image), tiles after: each tile counts once.
+    struct Partial {
+        ValueStats s;
+        void add(float v)
+        {
+            if (!std::isfinite(v)) {
+                ++s.nonFinite;
+                return;
+            }
+            ++s.finite;
+            s.min = std::min(s.min, v);
+            s.max = std::max(s.max, v);
+        }
+        void join(const Partial& o)
+        {
+            s.nonFinite += o.s.nonFinite;
+            s.finite += o.s.finite;
+            s.min = std::min(s.min, o.s.min);
+            s.max = std::max(s.max, o.s.max);
+        }
+    };
+    openvdb::tree::LeafManager<const openvdb::FloatTree> leaves(grid.tree());
+    Partial total = tbb::parallel_reduce(
+        leaves.leafRange(), Partial{},
+        [](const openvdb::tree::LeafManager<const openvdb::FloatTree>::LeafRange& range, Partial p) {
+            for (auto leaf = range.begin(); leaf; ++leaf)
+                for (auto it = leaf->cbeginValueOn(); it; ++it) p.add(*it);
+            return p;
+        },
+        [](Partial a, const Partial& b) {
+            a.join(b);
+            return a;
+        });
+    auto tile = grid.tree().cbeginValueOn();
+    tile.setMaxDepth(openvdb::FloatTree::DEPTH - 2);
+    for (; tile; ++tile) total.add(*tile);
+    return total.s;
 }
+
+std::uint64_t countNonFinite(const openvdb::FloatGrid& grid) { return valueStats(grid).nonFinite; }
 
 namespace {
 
@@ -268,7 +304,8 @@ void writeVdb(const std::string& path, const openvdb::GridCPtrVec& grids)
 
 nanovdb::GridHandle<nanovdb::HostBuffer> toNano(const openvdb::FloatGrid& grid)
 {
-    return nanovdb::openToNanoVDB(grid);
+    // Images need no statistics in the core (only the metric's bound, below): the bounding boxes.
+    return nanovdb::openToNanoVDB(grid, nanovdb::StatsMode::BBox);
 }
 
 nanovdb::GridHandle<nanovdb::HostBuffer> toNano(const openvdb::Vec3fGrid& grid)

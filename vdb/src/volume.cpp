@@ -99,13 +99,9 @@ void describe(ImageInfo& info, const openvdb::FloatGrid& grid)
     info.activeVoxels = grid.activeVoxelCount();
     const auto wb = grid.transform().indexToWorld(box);
     info.worldBounds = Box3(Vec3(wb.min().x(), wb.min().y(), wb.min().z()), Vec3(wb.max().x(), wb.max().y(), wb.max().z()));
-    float lo = std::numeric_limits<float>::max(), hi = -lo;
-    for (auto it = grid.tree().cbeginValueOn(); it; ++it) {
-        lo = std::min(lo, *it);
-        hi = std::max(hi, *it);
-    }
-    info.minValue = lo;
-    info.maxValue = hi;
+    const ValueStats values = valueStats(grid);
+    info.minValue = values.min;
+    info.maxValue = values.max;
 }
 
 } // namespace

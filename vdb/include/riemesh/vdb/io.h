@@ -10,6 +10,7 @@
 
 #include <array>
 #include <cstdint>
+#include <limits>
 #include <string>
 
 namespace riemesh::vdb {
@@ -19,6 +20,14 @@ void initialize();
 
 /// "fog", "levelset" or "unknown", from the grid class.
 std::string gridClassName(const openvdb::GridBase& grid);
+
+/// The active values (voxels and tiles, each tile once): range of the finite ones, count of the
+/// others (NaN or infinite). One parallel pass over the leaf nodes.
+struct ValueStats {
+    float min = std::numeric_limits<float>::max(), max = -std::numeric_limits<float>::max();
+    std::uint64_t finite = 0, nonFinite = 0;
+};
+ValueStats valueStats(const openvdb::FloatGrid& grid);
 
 /// Number of NaN or infinite values among the active voxels and tiles (tiles count once).
 std::uint64_t countNonFinite(const openvdb::FloatGrid& grid);
