@@ -225,14 +225,18 @@ void Evolution::updateConvergence()
     if (total >= o.maxIterations) { mReason = StopReason::IterationCap; return; }
     const bool coarse = mLevel + 1 < int(mLevels.size());
     const int inLevel = total - mLevelStart;
-    const int w = coarse ? o.coarseConvergenceWindow : o.convergenceWindow;
-    const int minimum = coarse ? 2 * w : std::max(o.minIterations, 2 * w);
-    const bool converged = inLevel >= minimum && settled(o, w);
     if (!coarse) {
-        if (converged) mReason = StopReason::Converged;
+        const int w = mLevels.size() > 1 ? o.scheduledConvergenceWindow : o.convergenceWindow;
+        if (inLevel >= std::max(mLevels.size() > 1 ? 0 : o.minIterations, 2 * w) && settled(o, w)) mReason = StopReason::Converged;
         return;
     }
-    if (converged || inLevel >= o.coarseMaxIterations) {
+    // A coarse level has arrived once no vertex travels any more (not even a few: a front filling a
+    // cavity through a hole is a handful of vertices, and it travels faster here than it would on
+    // the finer levels).
+    const int w = o.coarseConvergenceWindow;
+    bool arrived = inLevel >= w;
+    for (int i = total - w; arrived && i < total; ++i) arrived = mHistory[i].moving == 0;
+    if (arrived || inLevel >= o.coarseMaxIterations) {
         ++mLevel; // the next, finer level starts from this surface
         mLevelStart = total;
     }

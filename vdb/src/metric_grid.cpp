@@ -85,6 +85,25 @@ public:
         return Brick{CoordBBox(lo, hi), cell};
     }
     const CoordBBox& clip() const { return mClip; }
+    /// The bricks of these cells (duplicates allowed), in z, y, x order of their cells.
+    std::vector<Brick> bricks(std::vector<Coord> cells) const
+    {
+        const std::size_t nx = mStart[0].size() - 1, ny = mStart[1].size() - 1, nz = mStart[2].size() - 1;
+        std::vector<Brick> out;
+        if (nx * ny * nz <= (std::size_t(1) << 26)) { // a flag per cell: no sort
+            std::vector<char> used(nx * ny * nz, 0);
+            for (const Coord& c : cells) used[(std::size_t(c.z()) * ny + std::size_t(c.y())) * nx + std::size_t(c.x())] = 1;
+            for (std::size_t i = 0; i < used.size(); ++i)
+                if (used[i]) out.push_back(brick(Coord(int(i % nx), int(i / nx % ny), int(i / (nx * ny)))));
+            return out;
+        }
+        std::sort(cells.begin(), cells.end(), [](const Coord& a, const Coord& b) {
+            return a.z() != b.z() ? a.z() < b.z() : a.y() != b.y() ? a.y() < b.y() : a.x() < b.x();
+        });
+        cells.erase(std::unique(cells.begin(), cells.end()), cells.end());
+        for (const Coord& c : cells) out.push_back(brick(c));
+        return out;
+    }
 
 private:
     CoordBBox mClip;
@@ -114,14 +133,7 @@ std::vector<Brick> bricksNearLeaves(const TreeT& tree, int reach, const BrickLat
             for (int y = lo.y(); y <= hi.y(); ++y)
                 for (int x = lo.x(); x <= hi.x(); ++x) cells.emplace_back(x, y, z);
     }
-    std::sort(cells.begin(), cells.end(), [](const Coord& a, const Coord& b) {
-        return a.z() != b.z() ? a.z() < b.z() : a.y() != b.y() ? a.y() < b.y() : a.x() < b.x();
-    });
-    cells.erase(std::unique(cells.begin(), cells.end()), cells.end());
-    std::vector<Brick> bricks;
-    bricks.reserve(cells.size());
-    for (const Coord& c : cells) bricks.push_back(lattice.brick(c));
-    return bricks;
+    return lattice.bricks(std::move(cells));
 }
 
 /// The brick lattice over `clip` whose bricks near the leaves of `tree` gather the fewest voxels
@@ -448,11 +460,26 @@ openvdb::FloatGrid::Ptr gaussianSmooth(const openvdb::FloatGrid& image, double s
                         if (part.empty()) continue;
                         // Leaf nodes are never added or removed here: probing from threads is safe.
                         if (FloatLeaf* leaf = out->tree().probeLeaf(leafOrigin)) {
-                            for (auto it = part.begin(); it; ++it) {
-                                const auto i = FloatLeaf::coordToOffset(*it);
-                                const float v = smoothed(*it);
-                                if (leaf->isValueOn(i) || changed(v, leaf->getValue(i))) leaf->setValueOn(i, v);
-                            }
+                            float* values = leaf->buffer().data();
+                            auto& mask = leaf->getValueMask();
+                            for (int x = part.min().x(); x <= part.max().x(); ++x)
+                                for (int y = part.min().y(); y <= part.max().y(); ++y) {
+                                    // Leaf offsets run z fastest; the block x fastest.
+                                    const openvdb::Index i0 = FloatLeaf::coordToOffset(Coord(x, y, part.min().z()));
+                                    const float* src = &s.block[(std::size_t(part.min().z() - region.min().z()) * rd.y() +
+                                                                 std::size_t(y - region.min().y())) * rd.x() + std::size_t(x - region.min().x())];
+                                    const std::size_t stride = std::size_t(rd.x()) * rd.y();
+                                    for (int z = 0; z <= part.max().z() - part.min().z(); ++z) {
+                                        const openvdb::Index i = i0 + openvdb::Index(z);
+                                        const float v = src[std::size_t(z) * stride];
+                                        if (mask.isOn(i)) {
+                                            values[i] = v;
+                                        } else if (changed(v, values[i])) {
+                                            values[i] = v;
+                                            mask.setOn(i);
+                                        }
+                                    }
+                                }
                             continue;
                         }
                         float before;
@@ -752,17 +779,14 @@ openvdb::FloatGrid::Ptr windowExtreme(const openvdb::FloatGrid& in, int stride, 
             for (int y = lattice.segment(1, r.min().y()); y <= lattice.segment(1, r.max().y()); ++y)
                 for (int x = lattice.segment(0, r.min().x()); x <= lattice.segment(0, r.max().x()); ++x) cells.emplace_back(x, y, z);
     }
-    std::sort(cells.begin(), cells.end(), [](const Coord& a, const Coord& b) {
-        return a.z() != b.z() ? a.z() < b.z() : a.y() != b.y() ? a.y() < b.y() : a.x() < b.x();
-    });
-    cells.erase(std::unique(cells.begin(), cells.end()), cells.end());
-    std::vector<BrickLeaves<FloatLeaf>> leaves(cells.size());
+    const std::vector<Brick> bricks = lattice.bricks(std::move(cells));
+    std::vector<BrickLeaves<FloatLeaf>> leaves(bricks.size());
     const auto better = [maximum](float a, float b) { return maximum ? std::max(a, b) : std::min(a, b); };
     tbb::enumerable_thread_specific<BrickScratch> scratch;
-    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, cells.size(), 1), [&](const tbb::blocked_range<std::size_t>& rg) {
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, bricks.size(), 1), [&](const tbb::blocked_range<std::size_t>& rg) {
         BrickScratch& s = scratch.local();
         for (std::size_t b = rg.begin(); b != rg.end(); ++b) {
-            const CoordBBox region = lattice.brick(cells[b]).region;
+            const CoordBBox region = bricks[b].region;
             const Coord d = region.dim();
             const auto scaled = [stride](const Coord& c, int add) { return Coord(c.x() * stride + add, c.y() * stride + add, c.z() * stride + add); };
             const CoordBBox src(scaled(region.min(), offset), scaled(region.max(), offset + window - 1));

@@ -62,11 +62,13 @@ struct EvolutionOptions {
     double relativeChange = 0.02;
     double movingFraction = 0.002;
     std::size_t maxVertices = 4'000'000; ///< stop with VertexCap beyond this
-    /// Coarse levels of a schedule (see EvolutionLevel) move on to the next level once they have
-    /// converged by the test above with this window (a coarse level only has to bring the surface
-    /// near: its result is refined anyway), or after coarseMaxIterations.
+    /// Coarse levels of a schedule (see EvolutionLevel) move on to the next level once no vertex
+    /// has travelled (see movingFraction) for this many iterations: a coarse level only has to bring
+    /// the surface near, its result is refined anyway; or after coarseMaxIterations.
     int coarseConvergenceWindow = 8;
     int coarseMaxIterations = 300;
+    /// The finest level of a schedule starts next to its surface: its convergence window.
+    int scheduledConvergenceWindow = 12;
     /// For this many iterations after a coarse level, the shortest edge is levelSettleFactor delta
     /// (the longest stays zeta delta): the surface of a coarse level encloses the finer level's and
     /// shrinks onto it, which compresses the edges just split from the coarse ones; collapsing them a
