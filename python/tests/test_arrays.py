@@ -112,5 +112,5 @@ def test_bad_placement_and_missing_iso_are_value_errors():
         riemesh.mesh(ball())
     with pytest.raises(ValueError, match="apply to arrays only"):
         riemesh.mesh(riemesh.Volume(ball()), 0.5, spacing=2)
-    with pytest.raises(ValueError, match="the image box of 4000x4000x4000 voxels needs about"):
+    with pytest.raises(ValueError, match="the image of 4000x4000x4000 voxels needs about"):
         riemesh.Volume(np.broadcast_to(np.float32(0), (4000, 4000, 4000)), max_memory=1 << 30)

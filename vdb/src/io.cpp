@@ -139,28 +139,6 @@ std::string byteSize(double bytes)
     return s.str();
 }
 
-/// The box of a grid from the statistics OpenVDB writes with it (file_bbox_min/max), if present.
-/// Voxels along each axis of [lo, hi], in 64 bits (a corrupt file may put any two ints there);
-/// nullopt for an empty box.
-std::optional<VoxelDims> boxDims(const openvdb::Vec3i& lo, const openvdb::Vec3i& hi)
-{
-    VoxelDims dims;
-    for (int a = 0; a < 3; ++a) {
-        dims[a] = std::int64_t(hi[a]) - std::int64_t(lo[a]) + 1;
-        if (dims[a] <= 0) return std::nullopt;
-    }
-    return dims;
-}
-
-/// The box of a grid from the statistics OpenVDB writes with it (file_bbox_min/max), if present.
-std::optional<VoxelDims> boxFromFileStats(const openvdb::GridBase& grid)
-{
-    const auto lo = grid.getMetadata<openvdb::Vec3IMetadata>(openvdb::GridBase::META_FILE_BBOX_MIN);
-    const auto hi = grid.getMetadata<openvdb::Vec3IMetadata>(openvdb::GridBase::META_FILE_BBOX_MAX);
-    if (!lo || !hi) return std::nullopt;
-    return boxDims(lo->value(), hi->value());
-}
-
 openvdb::FloatGrid::Ptr checkedImage(openvdb::FloatGrid::Ptr grid, const std::string& path)
 {
     const std::string name = grid->getName();
@@ -189,16 +167,33 @@ openvdb::FloatGrid::Ptr toFloatGrid(const openvdb::GridBase::Ptr& base)
 
 } // namespace
 
+std::uint64_t estimatePipelineBytes(std::uint64_t imageBytes, bool levelSet)
+{
+    const double factor = levelSet ? kLevelSetBytesPerImageByte : kPipelineBytesPerImageByte;
+    return std::uint64_t(std::min(kPipelineFixedBytes + factor * double(imageBytes), 1.8e19));
+}
+
+void checkMemoryBudget(const std::string& path, std::uint64_t imageBytes, bool levelSet, std::uint64_t budgetBytes)
+{
+    if (budgetBytes == 0) return;
+    const double needed = double(estimatePipelineBytes(imageBytes, levelSet));
+    if (needed <= double(budgetBytes)) return;
+    throw fileError(path, "meshing this image needs about " + byteSize(needed) + " of memory (its grid takes " +
+                              byteSize(double(imageBytes)) + "), more than the budget of " +
+                              byteSize(double(budgetBytes)) + " (--max-memory)");
+}
+
 void checkMemoryBudget(const std::string& path, const VoxelDims& dims, std::uint64_t budgetBytes)
 {
     if (budgetBytes == 0) return;
+    // Every voxel active: leaf nodes of 512 floats and their masks, ~4.2 bytes per voxel.
     const double voxels = double(dims[0]) * double(dims[1]) * double(dims[2]);
-    const double needed = voxels * kPipelineBytesPerVoxel;
+    const double imageBytes = voxels * 4.2;
+    const double needed = kPipelineFixedBytes + kPipelineBytesPerImageByte * imageBytes;
     if (needed <= double(budgetBytes)) return;
-    throw fileError(path, "the image box of " + std::to_string(dims[0]) + "x" + std::to_string(dims[1]) + "x" +
+    throw fileError(path, "the image of " + std::to_string(dims[0]) + "x" + std::to_string(dims[1]) + "x" +
                               std::to_string(dims[2]) + " voxels needs about " + byteSize(needed) +
-                              " of memory, more than the budget of " + byteSize(double(budgetBytes)) +
-                              " (--max-memory)");
+                              " of memory, more than the budget of " + byteSize(double(budgetBytes)) + " (--max-memory)");
 }
 
 openvdb::FloatGrid::Ptr readVdbImage(const std::string& path, const std::string& gridName, std::uint64_t memoryBudget)
@@ -229,7 +224,10 @@ openvdb::FloatGrid::Ptr readVdbImage(const std::string& path, const std::string&
     if (!(chosen->isType<openvdb::FloatGrid>() || chosen->isType<openvdb::DoubleGrid>()))
         throw fileError(path, "grid '" + chosen->getName() + "' holds " + chosen->valueType() +
                                   " values, not a scalar float or double grid");
-    if (const auto dims = boxFromFileStats(*chosen)) checkMemoryBudget(path, *dims, memoryBudget);
+    // The file's statistics give the grid's size in memory before any voxel is read.
+    const bool levelSet = chosen->getGridClass() == openvdb::GRID_LEVEL_SET;
+    if (const auto bytes = chosen->getMetadata<openvdb::Int64Metadata>(openvdb::GridBase::META_FILE_MEM_BYTES))
+        if (bytes->value() > 0) checkMemoryBudget(path, std::uint64_t(bytes->value()), levelSet, memoryBudget);
 
     openvdb::GridBase::Ptr base;
     try {
@@ -243,8 +241,7 @@ openvdb::FloatGrid::Ptr readVdbImage(const std::string& path, const std::string&
     if (!grid->transform().isLinear())
         throw fileError(path, "grid '" + grid->getName() + "' has a non-linear (frustum) transform");
     checkedImage(grid, path);
-    const auto box = grid->evalActiveVoxelBoundingBox();
-    if (const auto dims = boxDims(box.min().asVec3i(), box.max().asVec3i())) checkMemoryBudget(path, *dims, memoryBudget);
+    checkMemoryBudget(path, grid->memUsage(), levelSet, memoryBudget);
     return grid;
 }
 
@@ -260,10 +257,8 @@ NanoFileGrids readNanoFile(const std::string& path, const std::string& gridName,
     }
     if (!gridName.empty() && volume.imageName() != gridName)
         throw fileError(path, "no image grid named '" + gridName + "' (image grid: '" + volume.imageName() + "')");
-    const auto& bbox = volume.imageGrid()->indexBBox();
-    if (const auto dims = boxDims(openvdb::Vec3i(bbox.min()[0], bbox.min()[1], bbox.min()[2]),
-                                  openvdb::Vec3i(bbox.max()[0], bbox.max()[1], bbox.max()[2])))
-        checkMemoryBudget(path, *dims, memoryBudget);
+    // The NanoVDB grid takes about what its OpenVDB form will.
+    checkMemoryBudget(path, volume.imageGrid()->gridSize(), volume.imageClass() == "levelset", memoryBudget);
     NanoFileGrids out;
     out.image = nanovdb::nanoToOpenVDB(*volume.imageGrid());
     out.image->setName(volume.imageName());

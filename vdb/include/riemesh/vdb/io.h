@@ -32,14 +32,22 @@ ValueStats valueStats(const openvdb::FloatGrid& grid);
 /// Number of NaN or infinite values among the active voxels and tiles (tiles count once).
 std::uint64_t countNonFinite(const openvdb::FloatGrid& grid);
 
-/// Bytes the converter needs per voxel of an image's active bounding box at its peak (the structure
-/// tensor and metric stages work on that box as a dense block). Measured as vdb2mesh's peak resident
-/// memory over box voxels: cube-cavity phantoms 64^3 / 128^3 / 192^3: 265 / 100 / 66 bytes (a fixed
-/// ~45 MB dominates small boxes); the Colin27 head MRI (181x217x181): 109 bytes. Rounded up.
-inline constexpr double kPipelineBytesPerVoxel = 128;
+/// The peak memory of meshing an image whose grid takes `imageBytes` in memory (its leaf nodes and
+/// tiles: openvdb memUsage, or the file's "file_mem_bytes"): the volume stage is sparse, so the
+/// peak follows the grid, not its bounding box. Measured as vdb2mesh's peak resident memory (with
+/// its defaults) over the grid's bytes: cube-cavity phantoms 100^3 / 200^3 / 400^3 (dense fog):
+/// 20 / 4.7 / 4.0 (a fixed ~60 MB dominates small images: the program, the mesh); level-set spheres
+/// r = 60 / 125 / 250: ... / ... / 9.9 (the smoothing widens the band, the metric fills it).
+/// Rounded up: kPipelineFixedBytes + factor x imageBytes.
+inline constexpr double kPipelineFixedBytes = 96.0 * 1024 * 1024;
+inline constexpr double kPipelineBytesPerImageByte = 5.0;
+inline constexpr double kLevelSetBytesPerImageByte = 12.0;
+std::uint64_t estimatePipelineBytes(std::uint64_t imageBytes, bool levelSet);
 
-/// Throws std::runtime_error naming `path`, the box and both sizes when an image box of
-/// `dims` voxels would need more than `budgetBytes` (kPipelineBytesPerVoxel each); 0 = no limit.
+/// Throws std::runtime_error naming `path`, the image and both sizes when meshing an image whose
+/// grid takes `imageBytes` (estimatePipelineBytes) would need more than `budgetBytes`; 0 = no limit.
+void checkMemoryBudget(const std::string& path, std::uint64_t imageBytes, bool levelSet, std::uint64_t budgetBytes);
+/// The same for a dense image of `dims` voxels (NIfTI files, arrays: every voxel active).
 using VoxelDims = std::array<std::int64_t, 3>;
 void checkMemoryBudget(const std::string& path, const VoxelDims& dims, std::uint64_t budgetBytes);
 
