@@ -15,6 +15,7 @@
 #include <tbb/info.h>
 
 #include <algorithm>
+#include <array>
 #include <cctype>
 #include <chrono>
 #include <cstdio>
@@ -166,11 +167,26 @@ std::uint64_t Volume::closeBorders(double iso, bool objectBrighter)
         float value;
     };
     std::vector<Pad> pads;
+    // Sparse: on each face, only the rectangle of the leaf nodes that touch it. Where a face lies in
+    // constant tiles there is nothing to close: a tile has no holes, and the image drops to its
+    // background just beyond the box, which closes the surface there.
+    std::array<openvdb::CoordBBox, 6> touched; // per face: axis * 2 + side
+    for (auto leaf = grid.tree().cbeginLeaf(); leaf; ++leaf) {
+        openvdb::CoordBBox b = leaf->getNodeBoundingBox();
+        b.intersect(box);
+        if (b.empty()) continue;
+        for (int axis = 0; axis < 3; ++axis) {
+            if (b.min()[axis] == box.min()[axis]) touched[2 * axis].expand(b);
+            if (b.max()[axis] == box.max()[axis]) touched[2 * axis + 1].expand(b);
+        }
+    }
     for (int axis = 0; axis < 3; ++axis) {
         const int ua = (axis + 1) % 3, va = (axis + 2) % 3;
-        const int u0 = box.min()[ua], v0 = box.min()[va];
-        const int nu = box.dim()[ua], nv = box.dim()[va];
         for (int side = 0; side < 2; ++side) {
+            const openvdb::CoordBBox& face = touched[2 * axis + side];
+            if (face.empty()) continue;
+            const int u0 = face.min()[ua], v0 = face.min()[va];
+            const int nu = face.dim()[ua], nv = face.dim()[va];
             const int c = side ? box.max()[axis] : box.min()[axis];
             const auto at = [&](int u, int v) {
                 openvdb::Coord ijk;
@@ -360,27 +376,40 @@ void Volume::downsample(int factor)
     xform->preTranslate(openvdb::Vec3d(box.min().asVec3d()) + openvdb::Vec3d(0.5 * (factor - 1)));
     xform->preScale(double(factor));
     out->setTransform(xform);
-    const openvdb::Coord dim = box.dim();
-    const openvdb::Coord n((dim.x() + factor - 1) / factor, (dim.y() + factor - 1) / factor, (dim.z() + factor - 1) / factor);
-    auto src = in.getConstAccessor();
-    auto dst = out->getAccessor();
-    for (int k = 0; k < n.z(); ++k)
-        for (int j = 0; j < n.y(); ++j)
-            for (int i = 0; i < n.x(); ++i) {
-                double sum = 0;
-                int count = 0;
-                for (int c = 0; c < factor; ++c)
-                    for (int b = 0; b < factor; ++b)
-                        for (int a = 0; a < factor; ++a) {
-                            const openvdb::Coord p = box.min() + openvdb::Coord(i * factor + a, j * factor + b, k * factor + c);
-                            float v;
-                            if (src.probeValue(p, v)) {
-                                sum += v;
-                                ++count;
-                            }
-                        }
-                if (count > 0) dst.setValue(openvdb::Coord(i, j, k), float(sum / count));
+    // Sparse: the active voxels of leaf nodes add to their block's sum and count; constant tiles fill
+    // the blocks they cover whole (a block a tile covers only in part averages its leaf voxels).
+    const auto block = [&](const openvdb::Coord& ijk) {
+        const openvdb::Coord r = ijk - box.min();
+        return openvdb::Coord(r.x() / factor, r.y() / factor, r.z() / factor);
+    };
+    {
+        auto tile = in.tree().cbeginValueOn();
+        tile.setMaxDepth(openvdb::FloatTree::DEPTH - 2);
+        for (; tile; ++tile) {
+            openvdb::CoordBBox t;
+            tile.getBoundingBox(t);
+            t.intersect(box);
+            if (t.empty()) continue;
+            const openvdb::Coord lo = block(t.min().offsetBy(factor - 1)), hi = block(t.max().offsetBy(1)).offsetBy(-1);
+            if (lo.x() <= hi.x() && lo.y() <= hi.y() && lo.z() <= hi.z())
+                out->tree().fill(openvdb::CoordBBox(lo, hi), *tile, true);
+        }
+    }
+    openvdb::DoubleGrid sums(0.0);
+    openvdb::Int32Grid counts(0);
+    {
+        auto sum = sums.getAccessor();
+        auto count = counts.getAccessor();
+        for (auto leaf = in.tree().cbeginLeaf(); leaf; ++leaf)
+            for (auto it = leaf->cbeginValueOn(); it; ++it) {
+                const openvdb::Coord b = block(it.getCoord());
+                sum.setValue(b, sum.getValue(b) + double(*it));
+                count.setValue(b, count.getValue(b) + 1);
             }
+    }
+    auto dst = out->getAccessor();
+    auto sum = sums.getConstAccessor();
+    for (auto it = counts.cbeginValueOn(); it; ++it) dst.setValue(it.getCoord(), float(sum.getValue(it.getCoord()) / *it));
     mImpl->image = out;
     mImpl->diag.reset();
     mImpl->off.reset();
