@@ -296,7 +296,8 @@ void App::reset()
     rebuildMetric();
     const EvolutionOptions o = evolutionOptions();
     try {
-        mMesh = makeInitialBox(*mImage, 0.5 * (1.0 + o.zeta) * o.delta);
+        const double scale = schedule().front().scale;
+        mMesh = makeInitialBox(*mImage, 0.5 * (1.0 + o.zeta) * o.delta * scale, scale > 1 ? 2.0 * scale * mImage->voxelSize() : 0.0);
     } catch (const std::exception& e) {
         mMessage = std::string("Cannot initialise: ") + e.what();
         mMesh = Mesh();

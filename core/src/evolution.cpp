@@ -30,6 +30,38 @@ namespace {
 /// in a core's cache (1-2 MB here), and core_bench measured the gain only above it.
 constexpr std::size_t kRenumberMinVertices = 16384;
 
+/// A component of a coarse level with this many vertices or fewer has collapsed (see
+/// updateConvergence()).
+constexpr std::size_t kCollapsedComponent = 6;
+
+/// The number of vertices of the smallest connected component (0 for an empty mesh).
+std::size_t smallestComponent(const Mesh& mesh)
+{
+    std::vector<int> label(mesh.n_vertices(), -1);
+    std::vector<VertexHandle> stack;
+    std::size_t smallest = 0;
+    bool any = false;
+    for (auto v : mesh.vertices()) {
+        if (label[v.idx()] >= 0) continue;
+        std::size_t size = 0;
+        label[v.idx()] = 1;
+        stack.push_back(v);
+        while (!stack.empty()) {
+            const VertexHandle u = stack.back();
+            stack.pop_back();
+            ++size;
+            for (auto w : mesh.vv_range(u))
+                if (label[w.idx()] < 0) {
+                    label[w.idx()] = 1;
+                    stack.push_back(w);
+                }
+        }
+        smallest = any ? std::min(smallest, size) : size;
+        any = true;
+    }
+    return smallest;
+}
+
 /// Free flight at most this fraction of vmax (see step()).
 constexpr double kCreaseRoom = 0.70710678118654752;
 
@@ -59,6 +91,10 @@ Evolution::Evolution(Mesh& mesh, std::vector<EvolutionLevel> levels, const Metri
             throw std::invalid_argument("evolution: every level needs an image and a scale >= 1");
     if (mOptions.coarseConvergenceWindow < 1 || mOptions.coarseMaxIterations < 1)
         throw std::invalid_argument("evolution: bad coarse-level limits");
+    if (mLevels.size() > 1) {
+        prepareMesh(mMesh);
+        mInitialMesh = mMesh;
+    }
     prepareMesh(mMesh);
     mChurn = mMesh.n_vertices(); // a given mesh's numbering is unknown: renumbered at the first step
     OpenMesh::VPropHandleT<char> mergeZone; // zones left by an earlier run count down from the start
@@ -171,8 +207,14 @@ IterationStats Evolution::step()
     // remove components smaller than a few delta-sized triangles. Specks come only from cuts, so the
     // O(n) component pass runs only for a while after one.
     int removed = 0;
-    if (mLastCut > 0 && iteration - mLastCut <= 60)
-        removed = removeSmallComponents(mMesh, 6, 0.5 * o.delta * o.delta * o.delta);
+    if (mLastCut > 0 && iteration - mLastCut <= 60) {
+        // On a coarse level a small object's surface (its coarse image holds it, grown by a block)
+        // may be as small as a few coarse edges allow: a speck by that level's measure, but a surface
+        // the finer levels refine. Specks are judged by the finest level's delta.
+        const bool coarse = mLevel + 1 < int(mLevels.size());
+        const double fine = mOptions.delta * mLevels.back().scale;
+        removed = removeSmallComponents(mMesh, coarse ? 4 : 6, 0.5 * fine * fine * fine);
+    }
 
     // Compaction is O(n) and costly in OpenMesh: deleted elements are skipped by every iterator, so
     // compact only once they pile up (or after a topology edit, which deletes whole one-rings).
@@ -230,13 +272,35 @@ void Evolution::updateConvergence()
         if (inLevel >= std::max(mLevels.size() > 1 ? 0 : o.minIterations, 2 * w) && settled(o, w)) mReason = StopReason::Converged;
         return;
     }
-    // A coarse level has arrived once no vertex travels any more (not even a few: a front filling a
-    // cavity through a hole is a handful of vertices, and it travels faster here than it would on
-    // the finer levels).
+    // A surface shrinking onto an object only a few of this level's edges across collapses into a
+    // handful of vertices (then turns inside out and balloons): this level and the coarser ones
+    // are too coarse for the image. Start again from the initial surface without them.
+    if (smallestComponent(mMesh) <= kCollapsedComponent) {
+        mLevels.erase(mLevels.begin(), mLevels.begin() + mLevel + 1);
+        mMesh = mInitialMesh;
+        if (mLevels.size() == 1) mInitialMesh = Mesh();
+        mLevel = 0;
+        mLevelStart = total;
+        mLastTopologyEvent = total;
+        mLastCut = mLastMerge = 0;
+        mChurn = mMesh.n_vertices();
+        ++mRestarts;
+        return;
+    }
+    // A coarse level has arrived once no more than kStragglers vertices travel (a front filling a
+    // cavity through a hole is a handful of vertices, which travel faster here than they would on
+    // the finer levels; one or two drifting vertices are not a front).
+    constexpr std::size_t kStragglers = 2;
     const int w = o.coarseConvergenceWindow;
     bool arrived = inLevel >= w;
-    for (int i = total - w; arrived && i < total; ++i) arrived = mHistory[i].moving == 0;
+    for (int i = total - w; arrived && i < total; ++i) arrived = mHistory[i].moving <= kStragglers;
     if (arrived || inLevel >= o.coarseMaxIterations) {
+        const double scale = mLevels[mLevel].scale / mLevels.back().scale;
+        mPredictedVertices = std::size_t(double(mHistory[total - 1].vertices) * scale * scale);
+        if (mPredictedVertices > o.maxVertices) {
+            mReason = StopReason::VertexCap;
+            return;
+        }
         ++mLevel; // the next, finer level starts from this surface
         mLevelStart = total;
     }
@@ -285,6 +349,8 @@ EvolutionStats evolve(Mesh& mesh, const std::vector<EvolutionLevel>& levels, con
     EvolutionStats stats;
     stats.iterations = evolution.history();
     stats.reason = evolution.reason();
+    stats.predictedVertices = evolution.predictedVertices();
+    stats.restarts = evolution.restarts();
     for (const auto& it : stats.iterations) {
         stats.splits += it.splits;
         stats.collapses += it.collapses;
@@ -296,10 +362,10 @@ EvolutionStats evolve(Mesh& mesh, const std::vector<EvolutionLevel>& levels, con
     return stats;
 }
 
-Mesh makeInitialBox(const ScalarImage& image, double edgeLength)
+Mesh makeInitialBox(const ScalarImage& image, double edgeLength, double grow)
 {
     const Box3 b = image.bounds();
-    const Vec3 inset = Vec3::Constant(image.voxelSize());
+    const Vec3 inset = Vec3::Constant(image.voxelSize() - std::max(grow, 0.0));
     const Vec3 lo = b.min() + inset, hi = b.max() - inset;
     if (!(hi.array() > lo.array()).all())
         throw std::invalid_argument("makeInitialBox: the image is too small for an initial box (needs > 2 voxels per axis)");

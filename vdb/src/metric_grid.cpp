@@ -16,6 +16,7 @@
 #include "riemesh/vdb/io.h"
 #include "brick_filters.h"
 
+#include <openvdb/tools/LevelSetUtil.h>
 #include <openvdb/tree/LeafManager.h>
 
 #include <tbb/blocked_range.h>
@@ -828,7 +829,58 @@ openvdb::FloatGrid::Ptr windowExtreme(const openvdb::FloatGrid& in, int stride, 
 
 } // namespace
 
-std::vector<openvdb::FloatGrid::Ptr> coarseLevels(const openvdb::FloatGrid& image, int levels, bool objectBrighter)
+namespace {
+
+/// The smallest, over the connected parts (26-connected) of the voxels of `grid` on the object's
+/// side of `iso`, of the longest side of their bounding boxes, in voxels (int max when none counts).
+/// Not counted: one-voxel parts (specks smaller than a block of a block-extreme grid), parts one
+/// or two voxels thin against a face of the box (where smoothing averaged fewer voxels, noise
+/// crosses iso more often; an object the box cuts gets a cap, not a shrinking shell), and parts
+/// whose box lies inside another part's box (most often enclosed by it, out of a deflating
+/// surface's reach: the brain inside a head's skin).
+int smallestObjectExtent(const openvdb::FloatGrid& grid, double iso, bool objectBrighter)
+{
+    const auto inside = [&](float v) { return objectBrighter ? v > iso : v < iso; };
+    openvdb::BoolTree mask(false);
+    {
+        openvdb::tree::ValueAccessor<openvdb::BoolTree> acc(mask);
+        for (auto leaf = grid.tree().cbeginLeaf(); leaf; ++leaf)
+            for (auto it = leaf->cbeginValueOn(); it; ++it)
+                if (inside(*it)) acc.setValueOn(it.getCoord(), true);
+        auto tile = grid.tree().cbeginValueOn();
+        tile.setMaxDepth(openvdb::FloatTree::DEPTH - 2);
+        for (; tile; ++tile) {
+            if (!inside(*tile)) continue;
+            CoordBBox b;
+            tile.getBoundingBox(b);
+            mask.fill(b, true, true);
+        }
+    }
+    if (mask.activeVoxelCount() == 0) return std::numeric_limits<int>::max();
+    std::vector<openvdb::BoolTree::Ptr> parts;
+    openvdb::tools::extractActiveVoxelSegmentMasks(mask, parts);
+    const CoordBBox box = grid.evalActiveVoxelBoundingBox();
+    std::vector<CoordBBox> boxes(parts.size());
+    for (std::size_t i = 0; i < parts.size(); ++i) parts[i]->evalActiveVoxelBoundingBox(boxes[i]);
+    int smallest = std::numeric_limits<int>::max();
+    for (std::size_t i = 0; i < boxes.size(); ++i) {
+        const CoordBBox& b = boxes[i];
+        const int extent = b.dim()[b.maxExtent()];
+        if (extent <= 1) continue;
+        bool ignored = false;
+        for (int a = 0; a < 3; ++a)
+            ignored |= b.dim()[a] <= 2 && (b.min()[a] <= box.min()[a] + 1 || b.max()[a] >= box.max()[a] - 1);
+        for (std::size_t j = 0; j < boxes.size() && !ignored; ++j)
+            ignored = j != i && boxes[j].isInside(b) && boxes[j] != b;
+        if (!ignored) smallest = std::min(smallest, extent);
+    }
+    return smallest;
+}
+
+} // namespace
+
+std::vector<openvdb::FloatGrid::Ptr> coarseLevels(const openvdb::FloatGrid& image, int levels, bool objectBrighter,
+                                                  double iso, double minObjectCells)
 {
     if (levels < 0 || levels > 12) throw std::invalid_argument("coarseLevels: levels must be in [0, 12]");
     initialize();
@@ -836,6 +888,8 @@ std::vector<openvdb::FloatGrid::Ptr> coarseLevels(const openvdb::FloatGrid& imag
     openvdb::FloatGrid::ConstPtr pooled = image.copy(); // shares the tree: no copy
     for (int l = 1; l <= levels; ++l) {
         pooled = windowExtreme(*pooled, 2, 2, 0, objectBrighter);
+        // The blocks' object (before the dilation by a block) must be minObjectCells - 2 long.
+        if (std::isfinite(iso) && smallestObjectExtent(*pooled, iso, objectBrighter) + 2 < minObjectCells) break;
         auto level = windowExtreme(*pooled, 1, 3, -1, objectBrighter);
         level->setName(kLevelGridPrefix + std::to_string(l));
         out.push_back(level);

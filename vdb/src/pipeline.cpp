@@ -241,8 +241,13 @@ PipelineResult meshVolume(Volume& volume, const PipelineOptions& options)
     volume.smooth(options.smooth);
     split(r.seconds.smooth);
     const int longest = std::max({r.image.dims[0], r.image.dims[1], r.image.dims[2]});
-    r.levels = options.levels >= 0 ? options.levels : autoLevels(longest, options.delta);
-    volume.buildLevels(r.levels, objectBrighter);
+    if (options.levels >= 0) {
+        r.levels = volume.buildLevels(options.levels, objectBrighter); // as many as asked
+    } else {
+        // Automatic: no level on which some part of the object would be less than kMinObjectEdges
+        // edges long (the shrinking surface would collapse on it).
+        r.levels = volume.buildLevels(autoLevels(longest, options.delta), objectBrighter, iso, kMinObjectEdges * options.delta);
+    }
     split(r.seconds.levels);
     if (interrupted(PipelineStage::Convert)) return r;
     const std::shared_ptr<const NanoVolume> nanoVolume = volume.releaseToNano();
@@ -275,9 +280,12 @@ PipelineResult meshVolume(Volume& volume, const PipelineOptions& options)
     opt.forces.objectBrighter = objectBrighter;
     if (options.progress) opt.progress = [&](const IterationStats& s) { return report(PipelineStage::Evolve, &s); };
 
-    const double initEdge = 0.5 * (1.0 + options.zeta) * opt.delta;
+    // The initial surface is sampled for the level it starts on (the coarsest).
+    const double initEdge = 0.5 * (1.0 + options.zeta) * opt.delta * levels.front().scale;
     switch (options.init.kind) {
-    case InitialSurface::Kind::Box: r.mesh = makeInitialBox(image, initEdge); break;
+    case InitialSurface::Kind::Box:
+        r.mesh = makeInitialBox(image, initEdge, levels.size() > 1 ? 2.0 * levels.front().scale * h : 0.0);
+        break;
     case InitialSurface::Kind::Spheres: r.mesh = makeBubbles(options.init.spheres, initEdge); break;
     case InitialSurface::Kind::Mesh:
         r.mesh = options.init.mesh;
@@ -292,6 +300,13 @@ PipelineResult meshVolume(Volume& volume, const PipelineOptions& options)
     if (r.stop == StopReason::VertexCap) {
         // A runaway mesh (delta too small for the image, or noise it keeps resolving): not a result
         // worth keeping. A limit the user set, so a bad parameter.
+        const auto& last = r.evolution.iterations.back();
+        if (last.level > 0 && r.evolution.predictedVertices > options.maxVertices)
+            throw PipelineInputError("the surface would need about " + std::to_string(r.evolution.predictedVertices) +
+                                     " vertices at this delta, past the vertex cap of " + std::to_string(options.maxVertices) +
+                                     " (--max-vertices): found on coarse level " + std::to_string(last.level) + " after " +
+                                     std::to_string(r.evolution.iterations.size()) +
+                                     " iterations; no output written (raise --delta or the cap)");
         throw PipelineInputError("the mesh grew past the vertex cap of " + std::to_string(options.maxVertices) +
                                  " vertices (--max-vertices) after " + std::to_string(r.evolution.iterations.size()) +
                                  " iterations; no output written (raise --delta or the cap)");
@@ -336,7 +351,8 @@ std::string pipelineStatsJson(const PipelineResult& r, const PipelineRecord& rec
                        {"open_borders", o.openBorders},
                        {"border_voxels_added", r.borderVoxels},
                        {"downsample", o.downsample},
-                       {"levels", r.levels}};
+                       {"levels", r.levels},
+                       {"level_restarts", r.evolution.restarts}};
     if (o.riemannian)
         j["metric"] = {{"active_voxels", r.metric.activeVoxels},
                        {"total_voxels", r.metric.totalVoxels},

@@ -271,10 +271,11 @@ void Volume::smooth(double sigmaVoxels)
     mImpl->levels.clear();
 }
 
-void Volume::buildLevels(int levels, bool objectBrighter)
+int Volume::buildLevels(int levels, bool objectBrighter, double iso, double minObjectCells)
 {
     mImpl->checkVoxels("buildLevels");
-    mImpl->levels = coarseLevels(*mImpl->image, levels, objectBrighter);
+    mImpl->levels = coarseLevels(*mImpl->image, levels, objectBrighter, iso, minObjectCells);
+    return int(mImpl->levels.size());
 }
 
 int Volume::levelCount() const { return int(mImpl->levels.size()); }

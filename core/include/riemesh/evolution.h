@@ -83,6 +83,8 @@ struct EvolutionOptions {
 struct EvolutionStats {
     std::vector<IterationStats> iterations;
     StopReason reason = StopReason::Running;
+    std::size_t predictedVertices = 0; ///< Evolution::predictedVertices() at the end
+    int restarts = 0;                  ///< Evolution::restarts()
     double seconds = 0;
     int splits = 0, collapses = 0, flips = 0, merges = 0, cuts = 0;
 };
@@ -113,6 +115,13 @@ public:
     IterationStats step();
     bool done() const { return mReason != StopReason::Running; }
     StopReason reason() const { return mReason; }
+    /// When a coarse level ends, the vertices the finest level should need: each halving of delta
+    /// about quadruples a surface's vertices. Past options.maxVertices the schedule stops there
+    /// with VertexCap (a runaway found at the cost of a coarse mesh). 0 before the first level ends.
+    std::size_t predictedVertices() const { return mPredictedVertices; }
+    /// Times a coarse level gave up on an object too small for it (see step()): the schedule then
+    /// started again from the initial surface without that level and the coarser ones.
+    int restarts() const { return mRestarts; }
     const std::vector<IterationStats>& history() const { return mHistory; }
     const EvolutionOptions& options() const { return mOptions; }
     /// The level being evolved, counted from the finest (0) up; levels() in all.
@@ -128,6 +137,9 @@ private:
     std::vector<EvolutionLevel> mLevels;
     int mLevel = 0;          ///< index into mLevels
     int mLevelStart = 0;     ///< iterations before the current level started
+    std::size_t mPredictedVertices = 0;
+    int mRestarts = 0;
+    Mesh mInitialMesh; ///< kept while coarse levels remain, for a restart
     const MetricField& mMetric;
     EvolutionOptions mOptions;
     std::vector<IterationStats> mHistory;
@@ -150,8 +162,10 @@ EvolutionStats evolve(Mesh& mesh, const std::vector<EvolutionLevel>& levels, con
                       const EvolutionOptions& options = {});
 
 /// The default initialisation: the image's bounds() inset by one voxel, as a box mesh with edges of
-/// about `edgeLength` (world units), that deflates onto the object.
-Mesh makeInitialBox(const ScalarImage& image, double edgeLength);
+/// about `edgeLength` (world units), that deflates onto the object. `grow` (world units) moves its
+/// faces out: a schedule's coarse images hold the object grown by up to two of their voxels, so a
+/// schedule starts 2^(levels + 1) voxels further out, where every level's object is inside the box.
+Mesh makeInitialBox(const ScalarImage& image, double edgeLength, double grow = 0.0);
 
 /// Spheres ("bubbles", centre and radius in world units) that inflate inside the object.
 Mesh makeBubbles(const std::vector<std::pair<Vec3, double>>& spheres, double edgeLength);

@@ -99,6 +99,10 @@ struct PipelineOptions {
 
 /// Edges across the image's longest side at the coarsest level chosen by autoLevels.
 inline constexpr double kCoarsestEdges = 16.0;
+/// Automatic levels stop below the first on which some part of the object is less than this many
+/// edges long (vdb::coarseLevels); and a level on which a component still collapses is dropped
+/// (Evolution::restarts()).
+inline constexpr double kMinObjectEdges = 3.0;
 /// The levels for an image `longestSideVoxels` long meshed with edges of `deltaVoxels`: the largest
 /// L with 2^L delta kCoarsestEdges <= the side (0 for images up to ~96 voxels at delta 3).
 int autoLevels(double longestSideVoxels, double deltaVoxels);

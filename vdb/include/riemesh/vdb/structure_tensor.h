@@ -13,6 +13,7 @@
 
 #include <openvdb/openvdb.h>
 
+#include <limits>
 #include <vector>
 
 namespace riemesh::vdb {
@@ -43,7 +44,15 @@ openvdb::FloatGrid::Ptr gaussianSmooth(const openvdb::FloatGrid& image, double s
 /// levels' and the finest's objects (thin plates, narrow gaps and all). Sparse like the rest: leaf
 /// nodes near the image's leaves are computed by bricks, constant tiles map to tiles. Named
 /// riemesh::kLevelGridPrefix + l, the image's class and background.
-std::vector<openvdb::FloatGrid::Ptr> coarseLevels(const openvdb::FloatGrid& image, int levels, bool objectBrighter);
+///
+/// With a finite `iso`, levels stop below the first one on which some part of the object (a
+/// connected set of cells on the object's side of iso, not enclosed by another) is less than
+/// `minObjectCells` cells long: a surface shrinking onto an object only a few edges across
+/// collapses before it can wrap it, so such an object must first be met on a finer level. Returns
+/// the levels kept (level 1 first; fewer than asked, possibly none).
+std::vector<openvdb::FloatGrid::Ptr> coarseLevels(const openvdb::FloatGrid& image, int levels, bool objectBrighter,
+                                                  double iso = std::numeric_limits<double>::quiet_NaN(),
+                                                  double minObjectCells = 0);
 
 /// Structure tensor of `image`.
 StructureTensorGrids structureTensor(const openvdb::FloatGrid& image, const StructureTensorOptions& options = {});

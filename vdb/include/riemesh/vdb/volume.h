@@ -72,7 +72,10 @@ public:
     /// extremes over 2^l voxels, dilated by a block, so that each holds the image's object),
     /// levels 1..`levels`; nano() and exportNanoVDB() carry them. 0 removes them; smooth() and
     /// downsample() drop them.
-    void buildLevels(int levels, bool objectBrighter);
+    /// With a finite `iso`, stops below a level where some part of the object is less than
+    /// `minObjectCells` of its cells long (vdb::coarseLevels). Returns the levels built.
+    int buildLevels(int levels, bool objectBrighter, double iso = std::numeric_limits<double>::quiet_NaN(),
+                    double minObjectCells = 0);
     int levelCount() const;
 
     /// Computes the structure-tensor metric of the current image (replacing any metric read from a
