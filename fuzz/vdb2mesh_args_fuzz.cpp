@@ -34,7 +34,7 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
         require(a.delta > 0 && std::isfinite(a.delta), "delta accepted out of range");
         require(a.zeta >= 2 && std::isfinite(a.zeta), "zeta accepted out of range");
         require(a.muMax >= 1 && a.muMax <= 10000, "mu-max accepted out of range");
-        require(a.sigma > 0 && a.rho > 0 && a.smooth >= 0, "sigma/rho/smooth accepted out of range");
+        require(a.sigma > 0 && a.rho > 0 && (a.smooth >= 0 || a.smooth == -1), "sigma/rho/smooth accepted out of range");
         require(a.maxIterations >= 1 && a.threads >= 0 && a.maxVertices >= 4, "count accepted out of range");
         if (a.init.rfind("sphere:", 0) == 0) {
             for (const auto& s : parseSpheres(a.init.substr(7)))

@@ -372,6 +372,50 @@ Mesh makeInitialBox(const ScalarImage& image, double edgeLength, double grow)
     return makeBox(lo, hi, edgeLength);
 }
 
+Mesh makeInitialBoxes(const ScalarImage& image, std::vector<Box3> parts, double edgeLength, double grow)
+{
+    if (parts.empty() || parts.size() > kMaxInitialBoxes) return makeInitialBox(image, edgeLength, grow);
+    if (!(edgeLength > 0)) throw std::invalid_argument("makeInitialBoxes: edge length must be > 0");
+    const Box3 b = image.bounds();
+    const Vec3 inset = Vec3::Constant(image.voxelSize() - std::max(grow, 0.0));
+    const Box3 outer(b.min() + inset, b.max() - inset);
+    if (!(outer.max().array() > outer.min().array()).all())
+        throw std::invalid_argument("makeInitialBoxes: the image is too small for an initial box (needs > 2 voxels per axis)");
+    for (Box3& p : parts) {
+        p = Box3(p.min() - Vec3::Constant(grow), p.max() + Vec3::Constant(grow)).intersection(outer);
+        // At least about two edges wide on every axis, still inside the outer box.
+        for (int a = 0; a < 3 && !p.isEmpty(); ++a) {
+            const double need = 2.0 * edgeLength - p.sizes()[a];
+            if (need > 0) {
+                p.min()[a] = std::max(outer.min()[a], p.min()[a] - 0.5 * need);
+                p.max()[a] = std::min(outer.max()[a], p.max()[a] + 0.5 * need);
+            }
+        }
+    }
+    parts.erase(std::remove_if(parts.begin(), parts.end(), [](const Box3& p) { return !(p.max().array() > p.min().array()).all(); }),
+                parts.end());
+    if (parts.empty()) return makeInitialBox(image, edgeLength, grow);
+    // Merge boxes closer than two edges until none are (each merge shrinks the list: ends).
+    const Vec3 gap = Vec3::Constant(edgeLength);
+    for (bool merged = true; merged;) {
+        merged = false;
+        for (std::size_t i = 0; i < parts.size() && !merged; ++i)
+            for (std::size_t j = i + 1; j < parts.size() && !merged; ++j) {
+                const Box3 a(parts[i].min() - gap, parts[i].max() + gap);
+                const Box3 c(parts[j].min() - gap, parts[j].max() + gap);
+                if (a.intersects(c)) {
+                    parts[i].extend(parts[j]);
+                    parts.erase(parts.begin() + std::ptrdiff_t(j));
+                    merged = true;
+                }
+            }
+    }
+    Mesh mesh;
+    prepareMesh(mesh);
+    for (const Box3& p : parts) appendMesh(mesh, makeBox(p.min(), p.max(), edgeLength));
+    return mesh;
+}
+
 Mesh makeBubbles(const std::vector<std::pair<Vec3, double>>& spheres, double edgeLength)
 {
     if (spheres.empty()) throw std::invalid_argument("makeBubbles: no sphere given");

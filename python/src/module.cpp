@@ -282,7 +282,7 @@ void fillArrays(PyMesh& out, const Mesh& mesh)
 
 PyMesh meshPy(const py::object& volumeArg, std::optional<double> iso, const py::object& spacing, const py::object& origin,
               const std::string& gridClass, const std::string& grid, const std::string& metric, double delta, double zeta,
-              double muMax, double sigma, double rho, double edgeGain, double smooth, int maxIterations,
+              double muMax, double sigma, double rho, double edgeGain, std::optional<double> smooth, int maxIterations,
               std::uint64_t maxVertices, const std::string& init, bool openBorders, int downsample, int levels, int threads,
               std::uint64_t maxMemory, const py::object& progress)
 {
@@ -444,7 +444,7 @@ writes it: name is one of phantom_shapes(); grid 'density' (a fog volume with ad
           py::arg("grid_class") = "unknown", py::arg("grid") = "", py::arg("metric") = "riemannian",
           py::arg("delta") = vdb::kDelta, py::arg("zeta") = vdb::kZeta, py::arg("mu_max") = vdb::kMuMax,
           py::arg("sigma") = vdb::kSigma, py::arg("rho") = vdb::kRho, py::arg("edge_gain") = vdb::kTangentialGain,
-          py::arg("smooth") = vdb::kSmooth, py::arg("max_iterations") = vdb::kMaxIterations,
+          py::arg("smooth") = py::none(), py::arg("max_iterations") = vdb::kMaxIterations,
           py::arg("max_vertices") = vdb::kMaxVertices, py::arg("init") = "box", py::arg("open_borders") = false,
           py::arg("downsample") = 1, py::arg("levels") = -1, py::arg("threads") = 0, py::arg("max_memory") = 0, py::arg("progress") = py::none(),
           R"doc(Meshes the isosurface `iso` of `volume` with the adaptive deformable model; returns a riemesh.Mesh.
@@ -458,7 +458,7 @@ iso: the isovalue, image intensity. Default 0.5 for fog volumes, 0 for level set
   required for other images (arrays are of class `grid_class`: 'unknown', 'fog' or 'levelset').
 The other options are vdb2mesh's flags, with the same defaults and units: metric ('riemannian' or
   'euclidean'), delta (shortest edge, metric length, voxels), zeta, mu_max, sigma and rho (voxels),
-  edge_gain, smooth (voxels), max_iterations, max_vertices, init ('box', 'sphere:X,Y,Z,R[;...]' in
+  edge_gain, smooth (voxels; default 1 for images, 0 for level sets), max_iterations, max_vertices, init ('box', 'sphere:X,Y,Z,R[;...]' in
   world units, 'mesh:FILE'), open_borders, downsample, levels (-1: automatic), threads,
   max_memory (bytes).
 progress: called after every iteration with that iteration's statistics (a dict, as in

@@ -101,6 +101,54 @@ TEST_CASE("evolution: a box deflating onto two separated balls pinches into two 
     CHECK(stats.cuts >= 1);
 }
 
+TEST_CASE("evolution: makeInitialBoxes starts a box per part, merges parts that would touch, else the whole box")
+{
+    const auto image = fogImage(
+        [](const Vec3& x) { return std::max(ballSdf(x, Vec3(-30, 0, 0), 4), ballSdf(x, Vec3(30, 0, 0), 4)); },
+        Box3(Vec3(-40, -10, -10), Vec3(40, 10, 10)));
+    const Box3 left(Vec3(-35, -5, -5), Vec3(-25, 5, 5)), right(Vec3(25, -5, -5), Vec3(35, 5, 5));
+    SUBCASE("two far parts: two boxes, each inside its grown part; they deflate onto the two balls")
+    {
+        Mesh mesh = makeInitialBoxes(image, {left, right}, 2.0, 1.0);
+        REQUIRE_MESH_OK(mesh);
+        CHECK(topologyOf(mesh).components == 2);
+        for (auto v : mesh.vertices()) {
+            const Vec3 p = position(mesh, v);
+            CHECK(std::abs(p.x()) >= 24.0 - 1e-9);
+            CHECK(std::abs(p.x()) <= 36.0 + 1e-9);
+        }
+        EuclideanMetric metric;
+        const auto stats = runChecked(mesh, image, metric, baseOptions(1.0));
+        CHECK(std::string(toString(stats.reason)) == "converged");
+        const auto t = topologyOf(mesh);
+        CHECK(t.components == 2);
+        CHECK(t.genus == 0);
+        CHECK(stats.merges == 0); // the boxes never met
+        CHECK(stats.iterations.size() < 60);
+    }
+    SUBCASE("parts closer than two edges: one box around both")
+    {
+        const Box3 near(Vec3(-22, -5, -5), Vec3(-12, 5, 5));
+        Mesh mesh = makeInitialBoxes(image, {left, near}, 2.0, 1.0);
+        REQUIRE_MESH_OK(mesh);
+        CHECK(topologyOf(mesh).components == 1);
+        double lo = 1e9, hi = -1e9;
+        for (auto v : mesh.vertices()) lo = std::min(lo, position(mesh, v).x()), hi = std::max(hi, position(mesh, v).x());
+        CHECK(lo == doctest::Approx(-36));
+        CHECK(hi == doctest::Approx(-11));
+    }
+    SUBCASE("a part beyond the image is clipped to the image's box; no part gives the whole box")
+    {
+        Mesh clipped = makeInitialBoxes(image, {Box3(Vec3(30, -50, -50), Vec3(80, 50, 50))}, 2.0);
+        REQUIRE_MESH_OK(clipped);
+        double hi = -1e9;
+        for (auto v : clipped.vertices()) hi = std::max(hi, position(clipped, v).z());
+        CHECK(hi == doctest::Approx(9)); // the image's box inset by a voxel
+        Mesh whole = makeInitialBoxes(image, {}, 2.0);
+        CHECK(whole.n_vertices() == makeInitialBox(image, 2.0).n_vertices());
+    }
+}
+
 TEST_CASE("evolution: a box deflating onto a torus ends with genus 1")
 {
     const auto image = fogImage([](const Vec3& x) { return torusSdf(x, 8, 3); },

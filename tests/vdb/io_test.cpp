@@ -8,12 +8,19 @@
 #include "riemesh/vdb/nano.h"
 #include "riemesh/vdb/nifti.h"
 #include "riemesh/vdb/phantom.h"
+#include "riemesh/vdb/pipeline.h"
 #include "riemesh/vdb/volume.h"
+
+#include "mesh_invariants.h"
 
 #include <nifti2_io.h>
 
+#include <openvdb/tools/Composite.h>
+#include <openvdb/tools/LevelSetSphere.h>
+
 #include <doctest/doctest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
@@ -486,4 +493,89 @@ TEST_CASE("vdb: bytes cut out of a file's middle are refused as corrupt (fuzz_vd
     }
     MESSAGE(refused << " of " << cuts.size() << " cut files refused (the rest erase only metadata padding)");
     CHECK(refused > 0);
+}
+
+namespace {
+
+void writeGrid(const openvdb::FloatGrid::Ptr& grid, const std::string& path)
+{
+    openvdb::io::File file(path);
+    file.write({grid});
+    file.close();
+}
+
+} // namespace
+
+TEST_CASE("sparse: two small level-set spheres at opposite corners of a 10^9-voxel box mesh as two spheres, unsmoothed")
+{
+    openvdb::initialize();
+    TempDir dir;
+    const float r = 12;
+    auto a = openvdb::tools::createLevelSetSphere<openvdb::FloatGrid>(r, openvdb::Vec3f(0, 0, 0), 1.0f, 3.0f);
+    auto b = openvdb::tools::createLevelSetSphere<openvdb::FloatGrid>(r, openvdb::Vec3f(1000, 1000, 1000), 1.0f, 3.0f);
+    openvdb::tools::csgUnion(*a, *b);
+    a->setName("ls");
+    REQUIRE(a->evalActiveVoxelBoundingBox().volume() > 1'000'000'000ull);
+    writeGrid(a, dir / "far.vdb");
+    Volume volume = Volume::read(dir / "far.vdb");
+    const PipelineResult result = meshVolume(volume, PipelineOptions{});
+    CHECK_MESH_OK(result.mesh);
+    CHECK((result.stop == riemesh::StopReason::Converged));
+    CHECK(result.topology.components == 2);
+    CHECK(result.topology.genus == 0);
+    CHECK(result.options.smooth == 0.0); // a level set is not smoothed by default
+    CHECK(result.evolution.iterations.size() < 200);
+    double worst = 0;
+    for (auto v : result.mesh.vertices()) {
+        const riemesh::Vec3 p = riemesh::position(result.mesh, v);
+        const double toA = std::abs(p.norm() - r), toB = std::abs((p - riemesh::Vec3::Constant(1000)).norm() - r);
+        worst = std::max(worst, std::min(toA, toB));
+    }
+    CHECK(worst < 0.5);
+}
+
+TEST_CASE("sparse: a fog volume whose root holds a 4096^3 constant tile meshes its small object; a tile-sized object is refused early")
+{
+    openvdb::initialize();
+    TempDir dir;
+    const auto ball = [](openvdb::FloatGrid& g, float inside, float outside) {
+        auto acc = g.getAccessor();
+        for (int x = 2000; x <= 2040; ++x)
+            for (int y = 2000; y <= 2040; ++y)
+                for (int z = 2000; z <= 2040; ++z) {
+                    const double d = std::sqrt(double((x - 2020) * (x - 2020) + (y - 2020) * (y - 2020) + (z - 2020) * (z - 2020)));
+                    const double t = std::clamp(20.5 - d, 0.0, 1.0); // 1 inside the ball
+                    if (t > 0) acc.setValueOn(Coord(x, y, z), float(outside + (inside - outside) * t));
+                }
+    };
+    SUBCASE("a ball in a tile of background value")
+    {
+        auto g = openvdb::FloatGrid::create(0.0f);
+        g->setName("fog");
+        g->setGridClass(openvdb::GRID_FOG_VOLUME);
+        g->tree().fill(openvdb::CoordBBox(Coord(0), Coord(4095)), 0.0f, true);
+        ball(*g, 1.0f, 0.0f);
+        writeGrid(g, dir / "tile.vdb");
+        Volume volume = Volume::read(dir / "tile.vdb");
+        const PipelineResult result = meshVolume(volume, PipelineOptions{});
+        CHECK_MESH_OK(result.mesh);
+        CHECK(result.topology.components == 1);
+        CHECK(result.topology.genus == 0);
+        CHECK(result.options.smooth == kSmooth);
+        for (auto v : result.mesh.vertices())
+            CHECK(std::abs((riemesh::position(result.mesh, v) - riemesh::Vec3::Constant(2020)).norm() - 20.5) < 1.0);
+    }
+    SUBCASE("the object is the tile: its surface needs more vertices than the cap, found on a coarse level")
+    {
+        auto g = openvdb::FloatGrid::create(0.0f);
+        g->setName("fog");
+        g->setGridClass(openvdb::GRID_FOG_VOLUME);
+        g->tree().fill(openvdb::CoordBBox(Coord(0), Coord(4095)), 1.0f, true);
+        ball(*g, 0.0f, 1.0f); // a cavity
+        writeGrid(g, dir / "tile.vdb");
+        Volume volume = Volume::read(dir / "tile.vdb");
+        const std::string message = messageOf([&] { meshVolume(volume, PipelineOptions{}); });
+        CHECK(contains(message, "would need about"));
+        CHECK(contains(message, "--max-vertices"));
+    }
 }

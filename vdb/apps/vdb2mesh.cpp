@@ -124,7 +124,7 @@ int main(int argc, char** argv)
         options.sigma = args.sigma;
         options.rho = args.rho;
         options.tangentialGain = args.tangentialGain;
-        options.smooth = args.smooth;
+        if (args.smooth >= 0) options.smooth = args.smooth;
         options.maxIterations = args.maxIterations;
         options.maxVertices = args.maxVertices;
         options.openBorders = args.openBorders;

@@ -32,7 +32,7 @@ struct Vdb2MeshArgs {
     std::string grid;
     std::optional<double> iso;
     bool riemannian = true;
-    double delta = kDelta, zeta = kZeta, muMax = kMuMax, sigma = kSigma, rho = kRho, smooth = kSmooth;
+    double delta = kDelta, zeta = kZeta, muMax = kMuMax, sigma = kSigma, rho = kRho, smooth = -1; ///< smooth: -1 = the default (PipelineOptions::smooth unset)
     int maxIterations = kMaxIterations;
     std::uint64_t maxVertices = kMaxVertices;
     std::uint64_t maxMemory = 0;       ///< bytes; 0 = the default budget (half the physical memory)

@@ -431,7 +431,8 @@ openvdb::FloatGrid::Ptr gaussianSmooth(const openvdb::FloatGrid& image, double s
     // far as the kernel reaches, e.g. into the corners between the caps of closeBorders). Constant
     // active tiles keep their value (exact inside; at their border only where they meet different
     // values, which leaf nodes hold).
-    const auto [lattice, bricks] = cheapestBricks(image.tree(), r, r, box);
+    const auto chosen = cheapestBricks(image.tree(), r, r, box);
+    const std::vector<Brick>& bricks = chosen.second; // (clang 14: no structured bindings in lambdas)
     std::vector<BrickLeaves<FloatLeaf>> added(bricks.size());
     tbb::enumerable_thread_specific<BrickScratch> scratch;
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, bricks.size(), 1), [&](const tbb::blocked_range<std::size_t>& rg) {
@@ -502,7 +503,8 @@ StructureTensorGrids structureTensor(const openvdb::FloatGrid& image, const Stru
     initialize();
     const CoordBBox box = activeBox(image);
     const TensorBricks tensor(image, options, box);
-    const auto [lattice, bricks] = cheapestBricks(image.tree(), tensor.halo(), tensor.halo(), box);
+    const auto chosen = cheapestBricks(image.tree(), tensor.halo(), tensor.halo(), box);
+    const std::vector<Brick>& bricks = chosen.second; // (clang 14: no structured bindings in lambdas)
     std::vector<BrickLeaves<Vec3fLeaf>> diag(bricks.size()), off(bricks.size());
     tbb::enumerable_thread_specific<BrickScratch> scratch;
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, bricks.size(), 1), [&](const tbb::blocked_range<std::size_t>& rg) {
@@ -559,7 +561,9 @@ MetricGrids computeMetric(const openvdb::FloatGrid& image, const StructureTensor
     // A level set's metric lives in its narrow band (the cells of its active voxels: where its surface
     // can be); other images' wherever the filters reach from their leaf nodes.
     const bool levelSet = image.getGridClass() == openvdb::GRID_LEVEL_SET;
-    const auto [lattice, bricks] = cheapestBricks(image.tree(), levelSet ? 0 : tensor.halo(), (tensor.halo() + 1) / 2, box, 1);
+    const auto chosen = cheapestBricks(image.tree(), levelSet ? 0 : tensor.halo(), (tensor.halo() + 1) / 2, box, 1);
+    const BrickLattice& lattice = chosen.first;
+    const std::vector<Brick>& bricks = chosen.second; // (clang 14: no structured bindings in lambdas)
     tbb::enumerable_thread_specific<BrickScratch> scratch;
 
     // The tensor of the bricks pass 1 computed, kept for pass 2 when the image is small.
@@ -755,10 +759,18 @@ openvdb::FloatGrid::Ptr windowExtreme(const openvdb::FloatGrid& in, int stride, 
             if (!it.isTileValue() || (!it.isValueOn() && *it == in.background())) continue;
             CoordBBox t;
             it.getBoundingBox(t);
-            CoordBBox o(Coord(floorDiv(t.min().x() - offset, stride), floorDiv(t.min().y() - offset, stride), floorDiv(t.min().z() - offset, stride)),
-                        Coord(floorDiv(t.max().x() - offset, stride), floorDiv(t.max().y() - offset, stride), floorDiv(t.max().z() - offset, stride)));
+            // The output cells whose window is centred in the tile: exact inside it and across
+            // borders with equal tiles; at a border with a different tile the extreme misses one
+            // cell (a tile next to a leaf node is exact: the bricks below reach into it). Block
+            // extremes map a tile onto whole output tiles; a dilation keeps the tile's own box.
+            // (Shifting that box by the window's offset would align no output node: every tile would
+            // become leaf nodes along its faces, gigabytes for a 4096^3 root tile.)
+            const int c = offset + (window - 1) / 2;
+            CoordBBox o(Coord(floorDiv(t.min().x() - c, stride), floorDiv(t.min().y() - c, stride), floorDiv(t.min().z() - c, stride)),
+                        Coord(floorDiv(t.max().x() - c, stride), floorDiv(t.max().y() - c, stride), floorDiv(t.max().z() - c, stride)));
             out->tree().fill(o, *it, it.isValueOn());
         }
+        out->tree().prune(); // equal tiles (a block extreme of a tile is finer than it) into larger ones
     }
     // Bricks of the output whose windows meet an input leaf node.
     std::vector<CoordBBox> reach;
@@ -831,15 +843,24 @@ openvdb::FloatGrid::Ptr windowExtreme(const openvdb::FloatGrid& in, int stride, 
 
 namespace {
 
-/// The smallest, over the connected parts (26-connected) of the voxels of `grid` on the object's
-/// side of `iso`, of the longest side of their bounding boxes, in voxels (int max when none counts).
-/// Not counted: one-voxel parts (specks smaller than a block of a block-extreme grid), parts one
-/// or two voxels thin against a face of the box (where smoothing averaged fewer voxels, noise
-/// crosses iso more often; an object the box cuts gets a cap, not a shrinking shell), and parts
-/// whose box lies inside another part's box (most often enclosed by it, out of a deflating
-/// surface's reach: the brain inside a head's skin).
-int smallestObjectExtent(const openvdb::FloatGrid& grid, double iso, bool objectBrighter)
+/// The connected parts (26-connected) of the voxels of `grid` on the object's side of `iso` that
+/// a deflating surface must wrap: their index boxes, and the smallest of their longest sides in
+/// voxels (int max when there is none). Left out: one-voxel parts (specks smaller than a block of
+/// a block-extreme grid), parts one or two voxels thin against a face of the box (where smoothing
+/// averaged fewer voxels, noise crosses iso more often; an object the box cuts gets a cap, not a
+/// shrinking shell), and parts whose box lies inside another part's box (most often enclosed by
+/// it, out of a deflating surface's reach: the brain inside a head's skin).
+struct ObjectParts {
+    std::vector<CoordBBox> boxes;
+    int smallest = std::numeric_limits<int>::max();
+};
+
+/// Above this many object voxels objectParts() gives their bounding box as one part.
+constexpr openvdb::Index64 kMaxPartVoxels = 16'000'000;
+
+ObjectParts objectParts(const openvdb::FloatGrid& grid, double iso, bool objectBrighter)
 {
+    ObjectParts out;
     const auto inside = [&](float v) { return objectBrighter ? v > iso : v < iso; };
     openvdb::BoolTree mask(false);
     {
@@ -856,13 +877,21 @@ int smallestObjectExtent(const openvdb::FloatGrid& grid, double iso, bool object
             mask.fill(b, true, true);
         }
     }
-    if (mask.activeVoxelCount() == 0) return std::numeric_limits<int>::max();
+    const openvdb::Index64 count = mask.activeVoxelCount();
+    if (count == 0) return out;
+    if (count > kMaxPartVoxels) {
+        // Too many to label one by one (a constant tile of the object, 4096^3 voxels): one part.
+        CoordBBox b;
+        mask.evalActiveVoxelBoundingBox(b);
+        out.boxes.push_back(b);
+        out.smallest = b.dim()[b.maxExtent()];
+        return out;
+    }
     std::vector<openvdb::BoolTree::Ptr> parts;
     openvdb::tools::extractActiveVoxelSegmentMasks(mask, parts);
     const CoordBBox box = grid.evalActiveVoxelBoundingBox();
     std::vector<CoordBBox> boxes(parts.size());
     for (std::size_t i = 0; i < parts.size(); ++i) parts[i]->evalActiveVoxelBoundingBox(boxes[i]);
-    int smallest = std::numeric_limits<int>::max();
     for (std::size_t i = 0; i < boxes.size(); ++i) {
         const CoordBBox& b = boxes[i];
         const int extent = b.dim()[b.maxExtent()];
@@ -872,27 +901,55 @@ int smallestObjectExtent(const openvdb::FloatGrid& grid, double iso, bool object
             ignored |= b.dim()[a] <= 2 && (b.min()[a] <= box.min()[a] + 1 || b.max()[a] >= box.max()[a] - 1);
         for (std::size_t j = 0; j < boxes.size() && !ignored; ++j)
             ignored = j != i && boxes[j].isInside(b) && boxes[j] != b;
-        if (!ignored) smallest = std::min(smallest, extent);
+        if (ignored) continue;
+        out.smallest = std::min(out.smallest, extent);
+        out.boxes.push_back(b);
     }
-    return smallest;
+    return out;
 }
 
 } // namespace
 
 std::vector<openvdb::FloatGrid::Ptr> coarseLevels(const openvdb::FloatGrid& image, int levels, bool objectBrighter,
-                                                  double iso, double minObjectCells)
+                                                  double iso, double minObjectCells, std::vector<openvdb::BBoxd>* objectBoxes)
 {
     if (levels < 0 || levels > 12) throw std::invalid_argument("coarseLevels: levels must be in [0, 12]");
+    if (objectBoxes && !std::isfinite(iso)) throw std::invalid_argument("coarseLevels: object boxes need a finite iso");
     initialize();
     std::vector<openvdb::FloatGrid::Ptr> out;
     openvdb::FloatGrid::ConstPtr pooled = image.copy(); // shares the tree: no copy
+    std::vector<CoordBBox> keptParts; // the object's parts on the last level kept (index boxes of `kept`)
+    openvdb::FloatGrid::ConstPtr kept;
     for (int l = 1; l <= levels; ++l) {
         pooled = windowExtreme(*pooled, 2, 2, 0, objectBrighter);
-        // The blocks' object (before the dilation by a block) must be minObjectCells - 2 long.
-        if (std::isfinite(iso) && smallestObjectExtent(*pooled, iso, objectBrighter) + 2 < minObjectCells) break;
+        if (std::isfinite(iso)) {
+            ObjectParts parts = objectParts(*pooled, iso, objectBrighter);
+            // The blocks' object (before the dilation by a block) must be minObjectCells - 2 long.
+            if (parts.smallest + 2.0 < minObjectCells) break;
+            keptParts = std::move(parts.boxes);
+            kept = pooled;
+        }
         auto level = windowExtreme(*pooled, 1, 3, -1, objectBrighter);
         level->setName(kLevelGridPrefix + std::to_string(l));
         out.push_back(level);
+    }
+    if (objectBoxes) {
+        if (!kept) { // no level: the parts of 2x2x2 blocks of the image
+            kept = windowExtreme(image, 2, 2, 0, objectBrighter);
+            keptParts = objectParts(*kept, iso, objectBrighter).boxes;
+        }
+        objectBoxes->clear();
+        for (const CoordBBox& b : keptParts) {
+            // The world box of the part's cells (each reaches half a cell beyond its centre).
+            openvdb::BBoxd w;
+            for (int corner = 0; corner < 8; ++corner) {
+                const openvdb::Vec3d ijk((corner & 1 ? b.max().x() : b.min().x()) + (corner & 1 ? 0.5 : -0.5),
+                                         (corner & 2 ? b.max().y() : b.min().y()) + (corner & 2 ? 0.5 : -0.5),
+                                         (corner & 4 ? b.max().z() : b.min().z()) + (corner & 4 ? 0.5 : -0.5));
+                w.expand(kept->transform().indexToWorld(ijk));
+            }
+            objectBoxes->push_back(w);
+        }
     }
     return out;
 }

@@ -140,7 +140,7 @@ void checkPipelineOptions(const PipelineOptions& o)
     positive("--rho", o.rho);
     if (!(o.tangentialGain >= 1) || o.tangentialGain > 1000)
         throw PipelineInputError("--edge-gain: must be in [1, 1000] (got " + shown(o.tangentialGain) + ")");
-    if (!(o.smooth >= 0) || !std::isfinite(o.smooth)) throw PipelineInputError("--smooth: must be >= 0");
+    if (o.smooth && (!(*o.smooth >= 0) || !std::isfinite(*o.smooth))) throw PipelineInputError("--smooth: must be >= 0");
     const auto count = [](const char* flag, double v, double lo, double hi) {
         if (v < lo || v > hi) {
             std::ostringstream msg;
@@ -238,11 +238,12 @@ PipelineResult meshVolume(Volume& volume, const PipelineOptions& options)
     }
     split(r.seconds.tensor);
     if (interrupted(PipelineStage::Smooth)) return r;
-    volume.smooth(options.smooth);
+    r.options.smooth = options.smooth ? *options.smooth : r.image.gridClass == "levelset" ? 0.0 : kSmooth;
+    volume.smooth(*r.options.smooth);
     split(r.seconds.smooth);
     const int longest = std::max({r.image.dims[0], r.image.dims[1], r.image.dims[2]});
     if (options.levels >= 0) {
-        r.levels = volume.buildLevels(options.levels, objectBrighter); // as many as asked
+        r.levels = volume.buildLevels(options.levels, objectBrighter, iso); // as many as asked
     } else {
         // Automatic: no level on which some part of the object would be less than kMinObjectEdges
         // edges long (the shrinking surface would collapse on it).
@@ -283,9 +284,16 @@ PipelineResult meshVolume(Volume& volume, const PipelineOptions& options)
     // The initial surface is sampled for the level it starts on (the coarsest).
     const double initEdge = 0.5 * (1.0 + options.zeta) * opt.delta * levels.front().scale;
     switch (options.init.kind) {
-    case InitialSurface::Kind::Box:
-        r.mesh = makeInitialBox(image, initEdge, levels.size() > 1 ? 2.0 * levels.front().scale * h : 0.0);
+    case InitialSurface::Kind::Box: {
+        // A box around each part of the object (found on 2^L-voxel blocks, or 2-voxel ones without
+        // levels), a coarsest cell beyond the coarsest image's object, which is dilated by one.
+        std::vector<Box3> parts = volume.objectBoxes();
+        const double grow = levels.size() > 1 ? 2.0 * levels.front().scale * h : 0.0;
+        if (levels.size() == 1)
+            for (Box3& p : parts) p = Box3(p.min() - Vec3::Constant(2 * h), p.max() + Vec3::Constant(2 * h));
+        r.mesh = makeInitialBoxes(image, std::move(parts), initEdge, grow);
         break;
+    }
     case InitialSurface::Kind::Spheres: r.mesh = makeBubbles(options.init.spheres, initEdge); break;
     case InitialSurface::Kind::Mesh:
         r.mesh = options.init.mesh;
@@ -345,7 +353,7 @@ std::string pipelineStatsJson(const PipelineResult& r, const PipelineRecord& rec
                        {"edge_gain", o.tangentialGain},
                        {"sigma_voxels", o.sigma},
                        {"rho_voxels", o.rho},
-                       {"smooth_voxels", o.smooth},
+                       {"smooth_voxels", o.smooth.value_or(kSmooth)},
                        {"max_iterations", o.maxIterations},
                        {"init", o.init.spec},
                        {"open_borders", o.openBorders},

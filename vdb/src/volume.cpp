@@ -69,6 +69,7 @@ struct Volume::Impl {
     openvdb::Vec3fGrid::Ptr diag, off;
     double muMax = 1.0;
     FloatGrids levels; ///< coarse images for the schedule, level 1 first
+    std::vector<Box3> objectBoxes; ///< see Volume::objectBoxes()
     /// After releaseToNano(): the grids in NanoVDB form; `image` is then an empty grid that keeps the
     /// transform, name and class, and diag, off and levels are gone.
     std::shared_ptr<const NanoVolume> released;
@@ -269,16 +270,23 @@ void Volume::smooth(double sigmaVoxels)
     if (sigmaVoxels <= 0) return;
     mImpl->image = gaussianSmooth(*mImpl->image, sigmaVoxels);
     mImpl->levels.clear();
+    mImpl->objectBoxes.clear();
 }
 
 int Volume::buildLevels(int levels, bool objectBrighter, double iso, double minObjectCells)
 {
     mImpl->checkVoxels("buildLevels");
-    mImpl->levels = coarseLevels(*mImpl->image, levels, objectBrighter, iso, minObjectCells);
+    std::vector<openvdb::BBoxd> boxes;
+    mImpl->levels = coarseLevels(*mImpl->image, levels, objectBrighter, iso, minObjectCells, std::isfinite(iso) ? &boxes : nullptr);
+    mImpl->objectBoxes.clear();
+    for (const openvdb::BBoxd& b : boxes)
+        mImpl->objectBoxes.emplace_back(Vec3(b.min().x(), b.min().y(), b.min().z()), Vec3(b.max().x(), b.max().y(), b.max().z()));
     return int(mImpl->levels.size());
 }
 
 int Volume::levelCount() const { return int(mImpl->levels.size()); }
+
+const std::vector<Box3>& Volume::objectBoxes() const { return mImpl->objectBoxes; }
 
 VolumeMetricStats Volume::computeMetric(const VolumeMetricOptions& options)
 {
@@ -416,6 +424,7 @@ void Volume::downsample(int factor)
     mImpl->off.reset();
     mImpl->muMax = 1.0;
     mImpl->levels.clear();
+    mImpl->objectBoxes.clear();
     describe(mImpl->info, *out);
 }
 

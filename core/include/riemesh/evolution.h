@@ -167,6 +167,15 @@ EvolutionStats evolve(Mesh& mesh, const std::vector<EvolutionLevel>& levels, con
 /// schedule starts 2^(levels + 1) voxels further out, where every level's object is inside the box.
 Mesh makeInitialBox(const ScalarImage& image, double edgeLength, double grow = 0.0);
 
+/// One box per part of the object: `parts` (world boxes, each holding a part, e.g. from
+/// vdb::Volume::objectBoxes()) grown by `grow`, clipped to makeInitialBox's box, and merged while
+/// any two come closer than two edges (a box around both replaces them), so that no two start
+/// touching. A small object in a large, mostly empty image is then met in a few iterations instead
+/// of after the whole box has shrunk onto it. Empty `parts`, or more than kMaxInitialBoxes of
+/// them, give makeInitialBox().
+Mesh makeInitialBoxes(const ScalarImage& image, std::vector<Box3> parts, double edgeLength, double grow = 0.0);
+inline constexpr std::size_t kMaxInitialBoxes = 4096;
+
 /// Spheres ("bubbles", centre and radius in world units) that inflate inside the object.
 Mesh makeBubbles(const std::vector<std::pair<Vec3, double>>& spheres, double edgeLength);
 

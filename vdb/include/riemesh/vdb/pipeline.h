@@ -31,7 +31,7 @@ inline constexpr double kMuMax = 9.0;
 inline constexpr double kSigma = 1.0;      // voxels
 inline constexpr double kRho = 2.0;        // voxels
 inline constexpr double kTangentialGain = 4.0;
-inline constexpr double kSmooth = 1.0;     // voxels
+inline constexpr double kSmooth = 1.0;     // voxels, images (level sets: 0)
 inline constexpr int kMaxIterations = 3000;
 inline constexpr std::uint64_t kMaxVertices = 4'000'000;
 
@@ -79,7 +79,10 @@ struct PipelineOptions {
     double sigma = kSigma;          ///< structure tensor pre-smoothing, voxels, > 0
     double rho = kRho;              ///< structure tensor window, voxels, > 0
     double tangentialGain = kTangentialGain; ///< --edge-gain, [1, 1000]
-    double smooth = kSmooth;        ///< Gaussian smoothing of the image the model fits, voxels, >= 0
+    /// Gaussian smoothing of the image the model fits, voxels, >= 0. Unset: kSmooth for images, 0 for
+    /// level sets (a signed distance is smooth already: smoothing would only cost time and round
+    /// its sharp edges). meshVolume's result holds the value used.
+    std::optional<double> smooth;
     int maxIterations = kMaxIterations;      ///< >= 1
     std::uint64_t maxVertices = kMaxVertices; ///< past it the run fails (PipelineInputError), >= 4
     bool openBorders = false;       ///< do not close objects cut by the image box

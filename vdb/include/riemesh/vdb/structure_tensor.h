@@ -50,9 +50,15 @@ openvdb::FloatGrid::Ptr gaussianSmooth(const openvdb::FloatGrid& image, double s
 /// `minObjectCells` cells long: a surface shrinking onto an object only a few edges across
 /// collapses before it can wrap it, so such an object must first be met on a finer level. Returns
 /// the levels kept (level 1 first; fewer than asked, possibly none).
+///
+/// With `objectBoxes` (and a finite iso): the world boxes of those parts of the object on the
+/// coarsest level kept (with no level, on blocks of 2x2x2 voxels), before its dilation; each
+/// holds a part of the image's object; no box lies inside another. Specks of one cell and slivers
+/// against the image box have none (see the levels' rule above).
 std::vector<openvdb::FloatGrid::Ptr> coarseLevels(const openvdb::FloatGrid& image, int levels, bool objectBrighter,
                                                   double iso = std::numeric_limits<double>::quiet_NaN(),
-                                                  double minObjectCells = 0);
+                                                  double minObjectCells = 0,
+                                                  std::vector<openvdb::BBoxd>* objectBoxes = nullptr);
 
 /// Structure tensor of `image`.
 StructureTensorGrids structureTensor(const openvdb::FloatGrid& image, const StructureTensorOptions& options = {});

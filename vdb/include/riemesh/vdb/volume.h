@@ -73,10 +73,14 @@ public:
     /// levels 1..`levels`; nano() and exportNanoVDB() carry them. 0 removes them; smooth() and
     /// downsample() drop them.
     /// With a finite `iso`, stops below a level where some part of the object is less than
-    /// `minObjectCells` of its cells long (vdb::coarseLevels). Returns the levels built.
+    /// `minObjectCells` of its cells long (vdb::coarseLevels), and keeps objectBoxes(). Returns
+    /// the levels built.
     int buildLevels(int levels, bool objectBrighter, double iso = std::numeric_limits<double>::quiet_NaN(),
                     double minObjectCells = 0);
     int levelCount() const;
+    /// World boxes around the separate parts of the object found by the last buildLevels() with
+    /// an iso (vdb::coarseLevels): where an initial surface per part can start. Empty otherwise.
+    const std::vector<Box3>& objectBoxes() const;
 
     /// Computes the structure-tensor metric of the current image (replacing any metric read from a
     /// .nvdb file).
