@@ -22,7 +22,7 @@ import subprocess
 import sys
 import time
 
-SECTIONS = ["phantom", "plate", "peers", "noise", "resolution", "head", "metric", "core"]
+SECTIONS = ["phantom", "plate", "peers", "noise", "resolution", "head", "metric", "core", "growth"]
 HEAD = "/usr/share/mricron/templates/ch2.nii.gz"
 
 
@@ -731,6 +731,145 @@ class Report:
                    '"metric.dat" using 1:3 with linespoints pt 5 lw 2 title "2 threads"', data)
             self.image(os.path.join(b.out, "metric_cost.png"), "metric cost")
 
+    # Scale: riemesh and the OpenVDB user's pipeline on growing dense and sparse inputs ---------------
+    def timed(self, what, cmd):
+        """Runs cmd under /usr/bin/time; returns (ok, stdout, wall seconds, peak KB, why)."""
+        b = self.b
+        out = os.path.join(b.work, "time.txt")
+        if os.path.exists(out):
+            os.remove(out)
+        okr, stdout, secs, why = b.run(what, ["/usr/bin/time", "-f", "%e %M", "-o", out] + cmd, self.timeout)
+        peak = None
+        if os.path.exists(out):
+            last = open(out).read().strip().splitlines()
+            if last:
+                try:
+                    peak = int(last[-1].split()[-1])
+                except ValueError:
+                    pass
+        return okr, stdout, secs, peak, why
+
+    def growth(self):
+        b = self.b
+        here = os.path.dirname(os.path.abspath(__file__))
+        peer = os.path.join(here, "peer_pipeline.py")
+        tools = os.path.join(here, "sphere_tools.py")
+        phantoms = [40, 64] if self.q else [100, 200, 300, 400]
+        radii = [20, 30] if self.q else [60, 125, 250, 500]
+        self.section("Scale: time and peak memory against the input's size, riemesh and the peer",
+                     "Each input meshed by `vdb2mesh` with its defaults, and by the pipeline an OpenVDB user runs "
+                     "today in one Python process (`bench/peer_pipeline.py`: pyopenvdb read, for fog volumes scipy "
+                     "Gaussian smoothing sigma 1.5 over the active box, volumeToMesh adaptivity 0.5, PLY write). Wall "
+                     "time and peak memory of the whole process (`/usr/bin/time -f %M`), one run each, in this same run "
+                     "(ratios = riemesh / peer). Inputs: the paper's phantom (`vdbphantom cube-cavity --noise 0.5`, a "
+                     "dense fog volume of N^3 voxels) and level-set spheres (`pyopenvdb.createLevelSetSphere(radius=r, "
+                     "voxelSize=1, halfWidth=3)`: sparse, a narrow band in a (2r+5)^3 box). Sphere error: two-sided, "
+                     "in voxels (`bench/sphere_tools.py error`: mesh to sphere over 45 samples per triangle, sphere to "
+                     "mesh over 20,000 rays).")
+        inputs = []
+        for n in phantoms:
+            img = b.phantom(n, 0.5)
+            inputs.append({"kind": "phantom", "size": n, "label": "phantom %d^3" % n, "image": img,
+                           "voxels": n ** 3, "box_voxels": n ** 3, "grid": "density"})
+        for r in radii:
+            path = os.path.join(b.work, "sphere_r%d.vdb" % r)
+            okr, out, _, why = b.run("sphere r=%d" % r, ["/usr/bin/python3", tools, "make", str(r), path], self.timeout)
+            row = {"kind": "sphere", "size": r, "label": "sphere r=%d" % r, "image": path if okr else None,
+                   "grid": "ls"}
+            if okr:
+                row.update(json.loads(out.strip().splitlines()[-1]))
+                row["voxels"] = row["active_voxels"]
+            inputs.append(row)
+        rows = []
+        for x in inputs:
+            row = {k: x.get(k) for k in ("kind", "size", "label", "voxels", "box_voxels")}
+            rows.append(row)
+            if not x.get("image"):
+                row["status"] = "input not made"
+                continue
+            ext = ".obj" if x["kind"] == "sphere" else ".ply"
+            mesh = os.path.join(b.work, "scale_%s_%d%s" % (x["kind"], x["size"], ext))
+            stats = os.path.join(b.work, "scale_%s_%d.json" % (x["kind"], x["size"]))
+            okr, _, secs, peak, why = self.timed("scale riemesh " + x["label"],
+                                                 [b.tool("vdb2mesh"), x["image"], mesh, "--grid", x["grid"], "-q",
+                                                  "--stats", stats])
+            if okr:
+                with open(stats) as f:
+                    j = json.load(f)
+                sm = j["summary"]
+                row.update(wall=secs, peak_mb=peak / 1024.0 if peak else None, vertices=sm["vertices"],
+                           components=sm["components"], genus=sm["genus"], iterations=sm["iterations"],
+                           levels=j["parameters"].get("levels"), read=sm.get("read_seconds"),
+                           volume=sm.get("metric_seconds"), evolve=sm.get("evolve_seconds"))
+                if x["kind"] == "sphere":
+                    oke, out, _, whye = b.run("sphere error r=%d" % x["size"],
+                                              ["/usr/bin/python3", tools, "error", mesh, str(x["size"])], self.timeout)
+                    if oke:
+                        e = json.loads(out.strip().splitlines()[-1])
+                        row.update(error_mean=e["mean"], error_max=e["max"])
+            else:
+                row["status"] = why
+            pmesh = os.path.join(b.work, "scale_peer_%s_%d.ply" % (x["kind"], x["size"]))
+            okp, out, psecs, ppeak, whyp = self.timed("scale peer " + x["label"],
+                                                      ["/usr/bin/python3", peer, x["image"], pmesh, "--grid", x["grid"]])
+            if okp:
+                pj = json.loads(out.strip().splitlines()[-1])
+                row.update(peer_wall=psecs, peer_peak_mb=ppeak / 1024.0 if ppeak else None,
+                           peer_vertices=pj.get("vertices"))
+            else:
+                row.setdefault("status", "peer: " + whyp)
+            if row.get("wall") and row.get("peer_wall"):
+                row["time_ratio"] = row["wall"] / row["peer_wall"]
+            if row.get("peak_mb") and row.get("peer_peak_mb"):
+                row["memory_ratio"] = row["peak_mb"] / row["peer_peak_mb"]
+        self.results["scale"] = rows
+        b.write_csv("scale.csv", rows, ["kind", "size", "voxels", "box_voxels", "wall", "peak_mb", "vertices",
+                                        "components", "genus", "iterations", "levels", "read", "volume", "evolve",
+                                        "error_mean", "error_max", "peer_wall", "peer_peak_mb", "peer_vertices",
+                                        "time_ratio", "memory_ratio", "status"])
+        self.md.append(table([
+            ("input", lambda x: x["label"]), ("active voxels", lambda x: fmt(x.get("voxels"))),
+            ("box voxels", lambda x: fmt(x.get("box_voxels"))),
+            ("riemesh s (read / volume / evolve)", lambda x: "%s (%s / %s / %s)" % (
+                fmt(x.get("wall")), fmt(x.get("read")), fmt(x.get("volume")), fmt(x.get("evolve")))
+                if x.get("wall") else "-"),
+            ("riemesh MB", lambda x: fmt(x.get("peak_mb"))),
+            ("peer s", lambda x: fmt(x.get("peer_wall"))), ("peer MB", lambda x: fmt(x.get("peer_peak_mb"))),
+            ("time ratio", lambda x: fmt(x.get("time_ratio"))), ("memory ratio", lambda x: fmt(x.get("memory_ratio"))),
+            ("vertices (peer)", lambda x: "%s (%s)" % (fmt(x.get("vertices")), fmt(x.get("peer_vertices")))),
+            ("components, genus", lambda x: "%s, %s" % (fmt(x.get("components")), fmt(x.get("genus")))),
+            ("levels, iterations", lambda x: "%s, %s" % (fmt(x.get("levels")), fmt(x.get("iterations")))),
+            ("sphere error mean / max (voxels)", lambda x: "%s / %s" % (fmt(x.get("error_mean")), fmt(x.get("error_max")))
+                if "error_mean" in x else "-"),
+            ("status", lambda x: x.get("status", "ok"))], rows))
+        for kind in ("phantom", "sphere"):
+            got = [x for x in rows if x["kind"] == kind and x.get("wall") and x.get("peer_wall")]
+            if len(got) >= 2:
+                f, l = got[0], got[-1]
+                grow = l["voxels"] / f["voxels"]
+                self.md.append("\n%s, from %s to %s (%.1fx the active voxels): riemesh time %.1fx, memory %.1fx; "
+                               "the peer's time %.1fx, memory %.1fx.\n" % (
+                                   kind.capitalize() + "s", f["label"], l["label"], grow, l["wall"] / f["wall"],
+                                   l["peak_mb"] / f["peak_mb"], l["peer_wall"] / f["peer_wall"],
+                                   l["peer_peak_mb"] / f["peer_peak_mb"]))
+        data = {}
+        for kind in ("phantom", "sphere"):
+            data["scale_%s.dat" % kind] = "".join(
+                "%d %s %s %s %s\n" % (x["voxels"], x["wall"], x["peer_wall"], x["peak_mb"], x["peer_peak_mb"])
+                for x in rows if x["kind"] == kind and x.get("wall") and x.get("peer_wall") and x.get("peak_mb")
+                and x.get("peer_peak_mb"))
+        if all(data.values()):
+            for col, png, ylabel, title in ((2, "scale_time.png", "wall seconds", "Wall time"),
+                                            (4, "scale_memory.png", "peak MB", "Peak memory")):
+                b.plot(png, 'set logscale xy\nset xlabel "active voxels"\nset ylabel "%s"\nset key top left\n'
+                       'set title "%s against the input size"\n'
+                       'plot "scale_phantom.dat" using 1:%d with linespoints pt 7 lw 2 title "riemesh, phantoms", '
+                       '"scale_phantom.dat" using 1:%d with linespoints pt 6 lw 2 dt 2 title "peer, phantoms", '
+                       '"scale_sphere.dat" using 1:%d with linespoints pt 5 lw 2 title "riemesh, level-set spheres", '
+                       '"scale_sphere.dat" using 1:%d with linespoints pt 4 lw 2 dt 2 title "peer, level-set spheres"' % (
+                           ylabel, title, col, col + 1, col, col + 1), data)
+                self.image(os.path.join(b.out, png), png[:-4].replace("_", " "))
+
     # The core's cost per iteration against the vertex count -------------------------------------
     def core(self):
         b = self.b
@@ -929,6 +1068,37 @@ class Report:
                 ", ".join("%d^3" % x["size"] for x in res), ", ".join(fmt(v) for v in vs), ratio, verdict(ratio, 1.3)))
         else:
             lines.append("- Riemannian vertex count across sizes: **not measured** (a run failed).")
+        sc = {(x["kind"], x["size"]): x for x in self.results.get("scale", [])}
+        s250, s500 = sc.get(("sphere", 250)), sc.get(("sphere", 500))
+        if s250:
+            if s250.get("time_ratio") and s250.get("error_mean") is not None:
+                good = (s250["components"] == 1 and s250["genus"] == 0 and s250["error_mean"] <= 0.1
+                        and s250["peak_mb"] <= 1024 and s250["time_ratio"] <= 3)
+                lines.append("- Level-set sphere r = 250: %s component(s), genus %s, two-sided mean error %s voxels "
+                             "(target <= 0.1), peak %s MB (target <= 1024), wall time %s / %s s = %.2fx the peer's "
+                             "(target <= 3x): %s." % (
+                                 fmt(s250["components"]), fmt(s250["genus"]), fmt(s250["error_mean"]),
+                                 fmt(s250["peak_mb"]), fmt(s250["wall"]), fmt(s250["peer_wall"]), s250["time_ratio"],
+                                 "**met**" if good else "**missed**"))
+            else:
+                lines.append("- Level-set sphere r = 250: **not measured** (%s)." % s250.get("status", "a run failed"))
+        if s250 and s500 and s250.get("peak_mb") and s500.get("peak_mb"):
+            m = s500["peak_mb"] / s250["peak_mb"]
+            lines.append("- Level-set sphere r = 500 (%s box voxels): peak %s MB = %.2fx r = 250's, target <= 4x: %s." % (
+                fmt(s500.get("box_voxels")), fmt(s500["peak_mb"]), m, verdict(m, 4.0)))
+        for n, tl, ml in ((100, 1.5, None), (400, 2.0, 1.5)):
+            x = sc.get(("phantom", n))
+            if not x:
+                continue
+            if x.get("time_ratio"):
+                line = "- Phantom %d^3, wall time %s / %s s = %.2fx the peer's, target <= %gx: %s" % (
+                    n, fmt(x["wall"]), fmt(x["peer_wall"]), x["time_ratio"], tl, verdict(x["time_ratio"], tl))
+                if ml and x.get("memory_ratio"):
+                    line += "; peak memory %s / %s MB = %.2fx, target <= %gx: %s" % (
+                        fmt(x["peak_mb"]), fmt(x["peer_peak_mb"]), x["memory_ratio"], ml, verdict(x["memory_ratio"], ml))
+                lines.append(line + ".")
+            else:
+                lines.append("- Phantom %d^3 against the peer: **not measured** (%s)." % (n, x.get("status", "a run failed")))
         return "\n".join(lines)
 
 
