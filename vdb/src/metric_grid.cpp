@@ -16,7 +16,6 @@
 #include "riemesh/vdb/io.h"
 #include "brick_filters.h"
 
-#include <openvdb/tools/LevelSetUtil.h>
 #include <openvdb/tree/LeafManager.h>
 
 #include <tbb/blocked_range.h>
@@ -772,70 +771,92 @@ openvdb::FloatGrid::Ptr windowExtreme(const openvdb::FloatGrid& in, int stride, 
         }
         out->tree().prune(); // equal tiles (a block extreme of a tile is finer than it) into larger ones
     }
-    // Bricks of the output whose windows meet an input leaf node.
-    std::vector<CoordBBox> reach;
+    // Output leaf nodes whose windows meet an input leaf node, each computed from the input block
+    // its windows cover (7 stride + window voxels a side), copied leaf by leaf: the cost follows
+    // the input's leaf nodes (a level set's narrow band), not a box around them.
+    std::vector<Coord> origins;
     for (auto it = in.tree().cbeginLeaf(); it; ++it) {
         const Coord o = it->origin();
         CoordBBox r;
         for (int a = 0; a < 3; ++a) {
-            r.min()[a] = ceilDiv(o[a] - offset - window + 1, stride);
-            r.max()[a] = floorDiv(o[a] + kLeafDim - 1 - offset, stride);
+            r.min()[a] = std::max(clip.min()[a], ceilDiv(o[a] - offset - window + 1, stride));
+            r.max()[a] = std::min(clip.max()[a], floorDiv(o[a] + kLeafDim - 1 - offset, stride));
         }
-        reach.push_back(r);
-    }
-    const BrickLattice lattice(clip, kBrickSizes[std::size(kBrickSizes) - 1]);
-    std::vector<Coord> cells;
-    for (CoordBBox r : reach) {
-        r.intersect(clip);
         if (r.empty()) continue;
-        for (int z = lattice.segment(2, r.min().z()); z <= lattice.segment(2, r.max().z()); ++z)
-            for (int y = lattice.segment(1, r.min().y()); y <= lattice.segment(1, r.max().y()); ++y)
-                for (int x = lattice.segment(0, r.min().x()); x <= lattice.segment(0, r.max().x()); ++x) cells.emplace_back(x, y, z);
+        for (int z = floorTo(r.min().z(), kLeafDim); z <= r.max().z(); z += kLeafDim)
+            for (int y = floorTo(r.min().y(), kLeafDim); y <= r.max().y(); y += kLeafDim)
+                for (int x = floorTo(r.min().x(), kLeafDim); x <= r.max().x(); x += kLeafDim) origins.emplace_back(x, y, z);
     }
-    const std::vector<Brick> bricks = lattice.bricks(std::move(cells));
-    std::vector<BrickLeaves<FloatLeaf>> leaves(bricks.size());
+    std::sort(origins.begin(), origins.end());
+    origins.erase(std::unique(origins.begin(), origins.end()), origins.end());
+    std::vector<std::unique_ptr<FloatLeaf>> leaves(origins.size());
     const auto better = [maximum](float a, float b) { return maximum ? std::max(a, b) : std::min(a, b); };
-    tbb::enumerable_thread_specific<BrickScratch> scratch;
-    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, bricks.size(), 1), [&](const tbb::blocked_range<std::size_t>& rg) {
-        BrickScratch& s = scratch.local();
-        for (std::size_t b = rg.begin(); b != rg.end(); ++b) {
-            const CoordBBox region = bricks[b].region;
-            const Coord d = region.dim();
-            const auto scaled = [stride](const Coord& c, int add) { return Coord(c.x() * stride + add, c.y() * stride + add, c.z() * stride + add); };
-            const CoordBBox src(scaled(region.min(), offset), scaled(region.max(), offset + window - 1));
-            const Coord e = src.dim();
-            s.block.resize(std::size_t(e.x()) * e.y() * e.z());
-            gather(in.tree(), src, box, s.block.data());
+    const int e = (kLeafDim - 1) * stride + window; // input block side
+    struct Scratch {
+        std::vector<float> block, pass1, pass2;
+    };
+    tbb::enumerable_thread_specific<Scratch> scratch;
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, origins.size(), 64), [&](const tbb::blocked_range<std::size_t>& rg) {
+        Scratch& s = scratch.local();
+        openvdb::tree::ValueAccessor<const openvdb::FloatTree> acc(in.tree());
+        s.block.resize(std::size_t(e) * e * e);
+        s.pass1.resize(std::size_t(kLeafDim) * e * e);
+        s.pass2.resize(std::size_t(kLeafDim) * kLeafDim * e);
+        for (std::size_t n = rg.begin(); n != rg.end(); ++n) {
+            const Coord o = origins[n];
+            const Coord start(o.x() * stride + offset, o.y() * stride + offset, o.z() * stride + offset);
+            const CoordBBox src(start, start.offsetBy(e - 1));
+            // The block, one input leaf-sized region at a time: a leaf node's values or a constant.
+            for (int z0 = floorTo(src.min().z(), kLeafDim); z0 <= src.max().z(); z0 += kLeafDim)
+                for (int y0 = floorTo(src.min().y(), kLeafDim); y0 <= src.max().y(); y0 += kLeafDim)
+                    for (int x0 = floorTo(src.min().x(), kLeafDim); x0 <= src.max().x(); x0 += kLeafDim) {
+                        const Coord c0(x0, y0, z0);
+                        CoordBBox part(c0, c0.offsetBy(kLeafDim - 1));
+                        part.intersect(src);
+                        const FloatLeaf* leaf = acc.probeConstLeaf(c0);
+                        const float constant = leaf ? 0.0f : acc.getValue(c0);
+                        for (int z = part.min().z(); z <= part.max().z(); ++z)
+                            for (int y = part.min().y(); y <= part.max().y(); ++y) {
+                                float* row = s.block.data() + (std::size_t(z - start.z()) * e + std::size_t(y - start.y())) * e;
+                                if (leaf) {
+                                    for (int x = part.min().x(); x <= part.max().x(); ++x)
+                                        row[x - start.x()] = leaf->getValue(FloatLeaf::coordToOffset(Coord(x, y, z)));
+                                } else {
+                                    for (int x = part.min().x(); x <= part.max().x(); ++x) row[x - start.x()] = constant;
+                                }
+                            }
+                    }
             // x, then y, then z: each pass keeps the extreme of `window` values every `stride`.
-            s.scratch.resize(std::size_t(d.x()) * e.y() * e.z());
-            for (std::size_t row = 0; row < std::size_t(e.y()) * e.z(); ++row)
-                for (int c = 0; c < d.x(); ++c) {
-                    const float* p = &s.block[row * e.x() + std::size_t(c) * stride];
+            for (std::size_t row = 0; row < std::size_t(e) * e; ++row)
+                for (int c = 0; c < kLeafDim; ++c) {
+                    const float* p = &s.block[row * e + std::size_t(c) * stride];
                     float v = p[0];
                     for (int k = 1; k < window; ++k) v = better(v, p[k]);
-                    s.scratch[row * d.x() + c] = v;
+                    s.pass1[row * kLeafDim + c] = v;
                 }
-            s.block.resize(std::size_t(d.x()) * d.y() * e.z());
-            for (int z = 0; z < e.z(); ++z)
-                for (int c = 0; c < d.y(); ++c)
-                    for (int x = 0; x < d.x(); ++x) {
-                        float v = s.scratch[(std::size_t(z) * e.y() + std::size_t(c) * stride) * d.x() + x];
+            for (int z = 0; z < e; ++z)
+                for (int c = 0; c < kLeafDim; ++c)
+                    for (int x = 0; x < kLeafDim; ++x) {
+                        float v = s.pass1[(std::size_t(z) * e + std::size_t(c) * stride) * kLeafDim + x];
                         for (int k = 1; k < window; ++k)
-                            v = better(v, s.scratch[(std::size_t(z) * e.y() + std::size_t(c) * stride + k) * d.x() + x]);
-                        s.block[(std::size_t(z) * d.y() + c) * d.x() + x] = v;
+                            v = better(v, s.pass1[(std::size_t(z) * e + std::size_t(c) * stride + k) * kLeafDim + x]);
+                        s.pass2[(std::size_t(z) * kLeafDim + c) * kLeafDim + x] = v;
                     }
-            for (int c = 0; c < d.z(); ++c)
-                for (int y = 0; y < d.y(); ++y)
-                    for (int x = 0; x < d.x(); ++x) {
-                        float v = s.block[(std::size_t(c) * stride * d.y() + y) * d.x() + x];
+            auto leaf = std::make_unique<FloatLeaf>(o, in.background(), false);
+            for (int c = 0; c < kLeafDim; ++c)
+                for (int y = 0; y < kLeafDim; ++y)
+                    for (int x = 0; x < kLeafDim; ++x) {
+                        float v = s.pass2[(std::size_t(c) * stride * kLeafDim + y) * kLeafDim + x];
                         for (int k = 1; k < window; ++k)
-                            v = better(v, s.block[((std::size_t(c) * stride + k) * d.y() + y) * d.x() + x]);
-                        const Coord ijk = region.min() + Coord(x, y, c);
-                        leaves[b].at(region, ijk, in.background()).setValueOn(ijk, v);
+                            v = better(v, s.pass2[((std::size_t(c) * stride + k) * kLeafDim + y) * kLeafDim + x]);
+                        const Coord ijk = o.offsetBy(x, y, c);
+                        if (clip.isInside(ijk)) leaf->setValueOn(ijk, v);
+                        else leaf->setValueOff(ijk, v);
                     }
+            leaves[n] = std::move(leaf);
         }
     });
-    for (auto& l : leaves) l.moveInto(out->tree());
+    for (auto& l : leaves) out->tree().addLeaf(l.release());
     return out;
 }
 
@@ -855,8 +876,63 @@ struct ObjectParts {
     int smallest = std::numeric_limits<int>::max();
 };
 
-/// Above this many object voxels objectParts() gives their bounding box as one part.
-constexpr openvdb::Index64 kMaxPartVoxels = 16'000'000;
+/// Labelling parts costs about a microsecond per voxel: masks with more voxels than this are
+/// halved (a cell is on when any of its 2x2x2 voxels is) until they have fewer.
+constexpr openvdb::Index64 kMaxPartVoxels = 256 * 1024;
+
+/// `in` on cells of 2x2x2 voxels, on where any voxel is; tiles stay tiles.
+openvdb::BoolTree halveMask(const openvdb::BoolTree& in)
+{
+    openvdb::BoolTree out(false);
+    openvdb::tree::ValueAccessor<openvdb::BoolTree> acc(out);
+    const auto half = [](const Coord& c) { return Coord(floorDiv(c.x(), 2), floorDiv(c.y(), 2), floorDiv(c.z(), 2)); };
+    for (auto leaf = in.cbeginLeaf(); leaf; ++leaf)
+        for (auto it = leaf->cbeginValueOn(); it; ++it) acc.setValueOn(half(it.getCoord()), true);
+    auto tile = in.cbeginValueOn();
+    tile.setMaxDepth(openvdb::BoolTree::DEPTH - 2);
+    for (; tile; ++tile) {
+        CoordBBox b;
+        tile.getBoundingBox(b);
+        out.fill(CoordBBox(half(b.min()), half(b.max())), true, true);
+    }
+    return out;
+}
+
+/// The bounding boxes of the 26-connected components of `mask`'s active voxels (a flood fill:
+/// OpenVDB's extractActiveVoxelSegmentMasks is not instantiated for bool trees in Debian's library).
+std::vector<CoordBBox> componentBoxes(const openvdb::BoolTree& mask)
+{
+    openvdb::BoolTree todo(mask);
+    todo.voxelizeActiveTiles();
+    std::vector<Coord> all;
+    all.reserve(std::size_t(todo.activeVoxelCount()));
+    for (auto it = todo.cbeginValueOn(); it; ++it) all.push_back(it.getCoord());
+    openvdb::tree::ValueAccessor<openvdb::BoolTree> acc(todo);
+    std::vector<CoordBBox> boxes;
+    std::vector<Coord> stack;
+    for (const Coord& seed : all) {
+        if (!acc.isValueOn(seed)) continue;
+        CoordBBox box(seed, seed);
+        acc.setValueOff(seed, false);
+        stack.push_back(seed);
+        while (!stack.empty()) {
+            const Coord p = stack.back();
+            stack.pop_back();
+            box.expand(p);
+            for (int dz = -1; dz <= 1; ++dz)
+                for (int dy = -1; dy <= 1; ++dy)
+                    for (int dx = -1; dx <= 1; ++dx) {
+                        const Coord n = p.offsetBy(dx, dy, dz);
+                        if (acc.isValueOn(n)) {
+                            acc.setValueOff(n, false);
+                            stack.push_back(n);
+                        }
+                    }
+        }
+        boxes.push_back(box);
+    }
+    return boxes;
+}
 
 ObjectParts objectParts(const openvdb::FloatGrid& grid, double iso, bool objectBrighter)
 {
@@ -877,28 +953,32 @@ ObjectParts objectParts(const openvdb::FloatGrid& grid, double iso, bool objectB
             mask.fill(b, true, true);
         }
     }
-    const openvdb::Index64 count = mask.activeVoxelCount();
-    if (count == 0) return out;
-    if (count > kMaxPartVoxels) {
-        // Too many to label one by one (a constant tile of the object, 4096^3 voxels): one part.
-        CoordBBox b;
-        mask.evalActiveVoxelBoundingBox(b);
-        out.boxes.push_back(b);
-        out.smallest = b.dim()[b.maxExtent()];
-        return out;
+    if (mask.activeVoxelCount() == 0) return out;
+    // Large masks (a dense image's object, a 4096^3 tile) are labelled on cells of 2^shift voxels:
+    // their parts' boxes then hold the voxels' parts, rounded out to whole cells.
+    int shift = 0;
+    while (mask.activeVoxelCount() > kMaxPartVoxels && shift < 20) {
+        openvdb::BoolTree half = halveMask(mask);
+        mask.clear();
+        mask.merge(half);
+        ++shift;
     }
-    std::vector<openvdb::BoolTree::Ptr> parts;
-    openvdb::tools::extractActiveVoxelSegmentMasks(mask, parts);
+    const auto voxels = [shift](const CoordBBox& cells) {
+        return CoordBBox(Coord(cells.min().x() << shift, cells.min().y() << shift, cells.min().z() << shift),
+                         Coord(((cells.max().x() + 1) << shift) - 1, ((cells.max().y() + 1) << shift) - 1,
+                               ((cells.max().z() + 1) << shift) - 1));
+    };
     const CoordBBox box = grid.evalActiveVoxelBoundingBox();
-    std::vector<CoordBBox> boxes(parts.size());
-    for (std::size_t i = 0; i < parts.size(); ++i) parts[i]->evalActiveVoxelBoundingBox(boxes[i]);
+    std::vector<CoordBBox> boxes = componentBoxes(mask);
+    for (CoordBBox& b : boxes) b = voxels(b);
     for (std::size_t i = 0; i < boxes.size(); ++i) {
         const CoordBBox& b = boxes[i];
         const int extent = b.dim()[b.maxExtent()];
-        if (extent <= 1) continue;
+        const int cell = 1 << shift;
+        if (extent <= cell) continue;
         bool ignored = false;
         for (int a = 0; a < 3; ++a)
-            ignored |= b.dim()[a] <= 2 && (b.min()[a] <= box.min()[a] + 1 || b.max()[a] >= box.max()[a] - 1);
+            ignored |= b.dim()[a] <= 2 * cell && (b.min()[a] <= box.min()[a] + cell || b.max()[a] >= box.max()[a] - cell);
         for (std::size_t j = 0; j < boxes.size() && !ignored; ++j)
             ignored = j != i && boxes[j].isInside(b) && boxes[j] != b;
         if (ignored) continue;
