@@ -46,6 +46,9 @@ constexpr int kBrickSizes[] = {16, 24, 32, 48};
 constexpr int kLeafDim = int(FloatLeaf::DIM);
 static_assert(kLeafDim == 8, "leaf coordinates are shifted by 3");
 
+/// c * factor (Coord's << is undefined behaviour on negative coordinates).
+Coord scaled(const Coord& c, int factor) { return Coord(c.x() * factor, c.y() * factor, c.z() * factor); }
+
 int floorTo(int v, int step) { return v >= 0 ? v - v % step : -((-v + step - 1) / step) * step; }
 
 /// A brick: its voxels (inside the clip box) and its position in the brick lattice.
@@ -327,7 +330,7 @@ private:
         // The voxels whose products the cells (grown by the cells' blur) average, then grown by the
         // gradient's and the image blur's reach.
         const CoordBBox grownCells = cells.expandBy(rc);
-        const CoordBBox voxels(grownCells.min() << 1, (grownCells.max() << 1).offsetBy(1));
+        const CoordBBox voxels(scaled(grownCells.min(), 2), scaled(grownCells.max(), 2).offsetBy(1));
         BlockDims d = grown(voxels, 1 + ri);
         s.block.resize(d.size());
         gather(mTree, voxels.expandBy(1 + ri), mClamp, s.block.data());
@@ -686,7 +689,7 @@ MetricGrids computeMetric(const openvdb::FloatGrid& image, const StructureTensor
             const std::uint8_t* mask = nullptr;
             if (levelSet) { // the cells with an active voxel of the band
                 s.mask.assign(n, 0);
-                const CoordBBox voxels(region.min() << 1, (region.max() << 1).offsetBy(1));
+                const CoordBBox voxels(scaled(region.min(), 2), scaled(region.max(), 2).offsetBy(1));
                 const Coord first(floorTo(voxels.min().x(), kLeafDim), floorTo(voxels.min().y(), kLeafDim), floorTo(voxels.min().z(), kLeafDim));
                 for (int lz = first.z(); lz <= voxels.max().z(); lz += kLeafDim)
                     for (int ly = first.y(); ly <= voxels.max().y(); ly += kLeafDim)
@@ -964,9 +967,8 @@ ObjectParts objectParts(const openvdb::FloatGrid& grid, double iso, bool objectB
         ++shift;
     }
     const auto voxels = [shift](const CoordBBox& cells) {
-        return CoordBBox(Coord(cells.min().x() << shift, cells.min().y() << shift, cells.min().z() << shift),
-                         Coord(((cells.max().x() + 1) << shift) - 1, ((cells.max().y() + 1) << shift) - 1,
-                               ((cells.max().z() + 1) << shift) - 1));
+        const int cell = 1 << shift;
+        return CoordBBox(scaled(cells.min(), cell), scaled(cells.max().offsetBy(1), cell).offsetBy(-1));
     };
     const CoordBBox box = grid.evalActiveVoxelBoundingBox();
     std::vector<CoordBBox> boxes = componentBoxes(mask);
