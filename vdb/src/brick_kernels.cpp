@@ -132,7 +132,7 @@ void blurZ(const float* in, BlockDims d, const float* w, int r, float* out)
 }
 
 /// The tensor products of one row of gradients (length n) into six row buffers.
-inline void productRow(const float* __restrict c, std::size_t sy, std::size_t sz, int n, const float* m, float* const rows[6])
+inline void productRow(const float* __restrict c, std::ptrdiff_t sy, std::ptrdiff_t sz, int n, const float* m, float* const rows[6])
 {
     const float m00 = m[0], m01 = m[1], m02 = m[2], m10 = m[3], m11 = m[4], m12 = m[5], m20 = m[6], m21 = m[7], m22 = m[8];
     float* __restrict xx = rows[0];
@@ -168,7 +168,7 @@ void tensorProducts(const float* in, BlockDims d, const double* m, float* const 
         for (int j = 0; j < oy; ++j, o += std::size_t(ox)) {
             float* rows[6];
             for (int c = 0; c < 6; ++c) rows[c] = out[c] + o;
-            productRow(in + (k + 1) * sz + (j + 1) * sy + 1, sy, sz, ox, mf, rows);
+            productRow(in + (k + 1) * sz + (j + 1) * sy + 1, std::ptrdiff_t(sy), std::ptrdiff_t(sz), ox, mf, rows);
         }
 }
 
@@ -191,7 +191,7 @@ void tensorProductsHalf(const float* in, BlockDims d, const double* toWorld, flo
             for (int c = 0; c < 6; ++c) std::fill_n(out[c] + o, hx, 0.0f);
             for (int b = 0; b < 2; ++b)
                 for (int a = 0; a < 2; ++a) {
-                    productRow(in + (2 * k + b + 1) * sz + (2 * j + a + 1) * sy + 1, sy, sz, gx, m, rows);
+                    productRow(in + (2 * k + b + 1) * sz + (2 * j + a + 1) * sy + 1, std::ptrdiff_t(sy), std::ptrdiff_t(sz), gx, m, rows);
                     for (int c = 0; c < 6; ++c) {
                         float* __restrict dst = out[c] + o;
                         const float* __restrict src = rows[c];
@@ -224,7 +224,7 @@ void tensorBlurXFixed(const float* in, BlockDims d, const float* m, const float*
     std::size_t o = 0;
     for (int k = 0; k < gz; ++k)
         for (int j = 0; j < gy; ++j, o += std::size_t(ox)) {
-            productRow(in + (k + 1) * sz + (j + 1) * sy + 1, sy, sz, gx, m, rows);
+            productRow(in + (k + 1) * sz + (j + 1) * sy + 1, std::ptrdiff_t(sy), std::ptrdiff_t(sz), gx, m, rows);
             for (int c = 0; c < 6; ++c) convolveRowFixed<R>(rows[c], ox, wt, out[c] + o);
         }
 }
