@@ -37,29 +37,24 @@ constexpr std::size_t kCollapsedComponent = 6;
 /// The number of vertices of the smallest connected component (0 for an empty mesh).
 std::size_t smallestComponent(const Mesh& mesh)
 {
-    std::vector<int> label(mesh.n_vertices(), -1);
-    std::vector<VertexHandle> stack;
-    std::size_t smallest = 0;
-    bool any = false;
-    for (auto v : mesh.vertices()) {
-        if (label[v.idx()] >= 0) continue;
-        std::size_t size = 0;
-        label[v.idx()] = 1;
-        stack.push_back(v);
-        while (!stack.empty()) {
-            const VertexHandle u = stack.back();
-            stack.pop_back();
-            ++size;
-            for (auto w : mesh.vv_range(u))
-                if (label[w.idx()] < 0) {
-                    label[w.idx()] = 1;
-                    stack.push_back(w);
-                }
-        }
-        smallest = any ? std::min(smallest, size) : size;
-        any = true;
-    }
-    return smallest;
+    int count = 0;
+    const std::vector<int> label = componentLabels(mesh, &count);
+    if (count == 0) return 0;
+    std::vector<std::size_t> size(std::size_t(count), 0);
+    for (int l : label)
+        if (l >= 0) ++size[std::size_t(l)];
+    return *std::min_element(size.begin(), size.end());
+}
+
+/// The box makeInitialBox() meshes: the image's bounds inset by a voxel, moved out by `grow`.
+Box3 initialBoxBounds(const ScalarImage& image, double grow, const char* who)
+{
+    const Box3 b = image.bounds();
+    const Vec3 inset = Vec3::Constant(image.voxelSize() - std::max(grow, 0.0));
+    const Box3 box(b.min() + inset, b.max() - inset);
+    if (!(box.max().array() > box.min().array()).all())
+        throw std::invalid_argument(std::string(who) + ": the image is too small for an initial box (needs > 2 voxels per axis)");
+    return box;
 }
 
 /// Free flight at most this fraction of vmax (see step()).
@@ -91,11 +86,8 @@ Evolution::Evolution(Mesh& mesh, std::vector<EvolutionLevel> levels, const Metri
             throw std::invalid_argument("evolution: every level needs an image and a scale >= 1");
     if (mOptions.coarseConvergenceWindow < 1 || mOptions.coarseMaxIterations < 1)
         throw std::invalid_argument("evolution: bad coarse-level limits");
-    if (mLevels.size() > 1) {
-        prepareMesh(mMesh);
-        mInitialMesh = mMesh;
-    }
     prepareMesh(mMesh);
+    if (mLevels.size() > 1) mInitialMesh = mMesh;
     mChurn = mMesh.n_vertices(); // a given mesh's numbering is unknown: renumbered at the first step
     OpenMesh::VPropHandleT<char> mergeZone; // zones left by an earlier run count down from the start
     if (mMesh.get_property_handle(mergeZone, kMergedProperty)) mLastMerge = 1;
@@ -364,23 +356,15 @@ EvolutionStats evolve(Mesh& mesh, const std::vector<EvolutionLevel>& levels, con
 
 Mesh makeInitialBox(const ScalarImage& image, double edgeLength, double grow)
 {
-    const Box3 b = image.bounds();
-    const Vec3 inset = Vec3::Constant(image.voxelSize() - std::max(grow, 0.0));
-    const Vec3 lo = b.min() + inset, hi = b.max() - inset;
-    if (!(hi.array() > lo.array()).all())
-        throw std::invalid_argument("makeInitialBox: the image is too small for an initial box (needs > 2 voxels per axis)");
-    return makeBox(lo, hi, edgeLength);
+    const Box3 box = initialBoxBounds(image, grow, "makeInitialBox");
+    return makeBox(box.min(), box.max(), edgeLength);
 }
 
 Mesh makeInitialBoxes(const ScalarImage& image, std::vector<Box3> parts, double edgeLength, double grow)
 {
     if (parts.empty() || parts.size() > kMaxInitialBoxes) return makeInitialBox(image, edgeLength, grow);
     if (!(edgeLength > 0)) throw std::invalid_argument("makeInitialBoxes: edge length must be > 0");
-    const Box3 b = image.bounds();
-    const Vec3 inset = Vec3::Constant(image.voxelSize() - std::max(grow, 0.0));
-    const Box3 outer(b.min() + inset, b.max() - inset);
-    if (!(outer.max().array() > outer.min().array()).all())
-        throw std::invalid_argument("makeInitialBoxes: the image is too small for an initial box (needs > 2 voxels per axis)");
+    const Box3 outer = initialBoxBounds(image, grow, "makeInitialBoxes");
     for (Box3& p : parts) {
         p = Box3(p.min() - Vec3::Constant(grow), p.max() + Vec3::Constant(grow)).intersection(outer);
         // At least about two edges wide on every axis, still inside the outer box.

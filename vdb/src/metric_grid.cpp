@@ -966,8 +966,8 @@ ObjectParts objectParts(const openvdb::FloatGrid& grid, double iso, bool objectB
         mask.merge(half);
         ++shift;
     }
-    const auto voxels = [shift](const CoordBBox& cells) {
-        const int cell = 1 << shift;
+    const int cell = 1 << shift;
+    const auto voxels = [cell](const CoordBBox& cells) {
         return CoordBBox(scaled(cells.min(), cell), scaled(cells.max().offsetBy(1), cell).offsetBy(-1));
     };
     const CoordBBox box = grid.evalActiveVoxelBoundingBox();
@@ -976,7 +976,6 @@ ObjectParts objectParts(const openvdb::FloatGrid& grid, double iso, bool objectB
     for (std::size_t i = 0; i < boxes.size(); ++i) {
         const CoordBBox& b = boxes[i];
         const int extent = b.dim()[b.maxExtent()];
-        const int cell = 1 << shift;
         if (extent <= cell) continue;
         bool ignored = false;
         for (int a = 0; a < 3; ++a)
@@ -1007,7 +1006,13 @@ std::vector<openvdb::FloatGrid::Ptr> coarseLevels(const openvdb::FloatGrid& imag
         if (std::isfinite(iso)) {
             ObjectParts parts = objectParts(*pooled, iso, objectBrighter);
             // The blocks' object (before the dilation by a block) must be minObjectCells - 2 long.
-            if (parts.smallest + 2.0 < minObjectCells) break;
+            if (parts.smallest + 2.0 < minObjectCells) {
+                if (l == 1) { // no level kept: these are the parts of the image's 2x2x2 blocks below
+                    keptParts = std::move(parts.boxes);
+                    kept = pooled;
+                }
+                break;
+            }
             keptParts = std::move(parts.boxes);
             kept = pooled;
         }
