@@ -8,7 +8,7 @@
 // meshing a noisy image), then meshes it with OpenVDB's tools::volumeToMesh at each adaptivity and,
 // with --mc, with the plain marching cubes below. Quads are split in two triangles before anything is
 // counted. Each mesh is measured with the same code as vdb2mesh --reference (vdb/level_set.h
-// surfaceError: mean and Hausdorff distance, voxels) and its topology is counted on the triangle
+// surfaceError: both ways from dense samples of both surfaces, voxels) and its topology is counted on the triangle
 // arrays (components, genus, and whether it is a closed, oriented 2-manifold at all: the genus of
 // anything else means nothing). One CSV row per mesh on stdout.
 //
@@ -358,20 +358,22 @@ void printMeshRow(const Args& a, const std::string& tool, const std::string& set
 {
     tidy(soup);
     const SoupTopology t = topologyOf(soup);
-    std::string mean = "", hausdorff = "";
+    std::string mean = "", hausdorff = "", surfaceMean = "";
     if (sdf) {
-        const vdb::SurfaceError e = vdb::surfaceError(soup.points, soup.triangles, *sdf);
+        const vdb::SurfaceError e = vdb::surfaceError(soup.points, soup.triangles, *sdf, vdb::phantomReferenceDistance(*sdf));
         const double h = sdf->transform().voxelSize()[0];
         char buf[64];
-        std::snprintf(buf, sizeof buf, "%.4f", e.meanVertexDistance / h);
+        std::snprintf(buf, sizeof buf, "%.4f", e.meanMeshToSurface / h);
         mean = buf;
         std::snprintf(buf, sizeof buf, "%.4f", e.hausdorff / h);
         hausdorff = buf;
+        std::snprintf(buf, sizeof buf, "%.4f", e.meanSurfaceToMesh / h);
+        surfaceMean = buf;
     }
-    std::printf("%s,%s,%s,%zu,%zu,%s,%s,%d,%d,%d,%zu,%zu,%.4f,%.4f\n", csvField(a.label).c_str(), tool.c_str(),
+    std::printf("%s,%s,%s,%zu,%zu,%s,%s,%d,%d,%d,%zu,%zu,%.4f,%.4f,%s\n", csvField(a.label).c_str(), tool.c_str(),
                 csvField(setting).c_str(), t.vertices, t.triangles, mean.c_str(), hausdorff.c_str(), t.components,
                 t.genus, t.closedManifold() ? 1 : 0, t.boundaryEdges, t.nonManifoldEdges + t.misorientedEdges,
-                smoothSeconds + meshSeconds, smoothSeconds);
+                smoothSeconds + meshSeconds, smoothSeconds, surfaceMean.c_str());
     std::fflush(stdout);
     if (!a.objDir.empty()) {
         std::string name = tool + "_" + setting;
@@ -406,7 +408,7 @@ int runMesh(const Args& a, const openvdb::FloatGrid::Ptr& image)
         a.gaussianWidth > 0 ? "gauss " + std::to_string(a.gaussianWidth) + ":" + std::to_string(a.gaussianIterations) : "raw";
 
     std::printf("image,tool,setting,vertices,triangles,mean_voxels,hausdorff_voxels,components,genus,closed_manifold,"
-                "boundary_edges,bad_edges,seconds,smooth_seconds\n");
+                "boundary_edges,bad_edges,seconds,smooth_seconds,surface_mean_voxels\n");
     for (double adaptivity : a.adaptivities) {
         t0 = Clock::now();
         std::vector<openvdb::Vec3s> points;

@@ -238,7 +238,10 @@ int main(int argc, char** argv)
                         topo.genus, selfIntersections, evo.iterations.size(), toString(evo.reason), seconds,
                         result.seconds.metric, evo.seconds);
             if (ref)
-                std::printf("; vs reference: mean %.3f, Hausdorff %.3f voxels", ref->mean / ref->voxelSize,
+                std::printf("; vs reference (voxels): mesh->surface mean %.3f max %.3f, surface->mesh mean %.3f "
+                            "max %.3f, Hausdorff %.3f",
+                            ref->meanMeshToSurface / ref->voxelSize, ref->maxMeshToSurface / ref->voxelSize,
+                            ref->meanSurfaceToMesh / ref->voxelSize, ref->maxSurfaceToMesh / ref->voxelSize,
                             ref->hausdorff / ref->voxelSize);
             std::printf("\n");
         }

@@ -1,4 +1,4 @@
-// OpenVDB / NanoVDB file I/O, NanoVDB conversion and mesh level sets (io.h, nano.h, level_set.h).
+// OpenVDB / NanoVDB file I/O and NanoVDB conversion (io.h, nano.h).
 #include "riemesh/vdb/io.h"
 #include "riemesh/vdb/level_set.h"
 #include "riemesh/vdb/metric_grid.h"
@@ -8,8 +8,6 @@
 
 #include <openvdb/io/File.h>
 #include <openvdb/tree/LeafManager.h>
-#include <openvdb/tools/MeshToVolume.h>
-#include <openvdb/tools/Interpolation.h>
 
 #include <nanovdb/util/IO.h>
 #include <nanovdb/util/NanoToOpenVDB.h>
@@ -365,118 +363,6 @@ void writeNvdb(const std::string& path, const NanoVolume& volume, double iso)
         out.close();
         if (!out) throw std::runtime_error("'" + path + "': write failed");
     });
-}
-
-// ---- level_set.h ---------------------------------------------------------------------------------
-
-namespace {
-
-/// The live vertices (world space) and faces of `mesh` as index arrays.
-void meshArrays(const Mesh& mesh, std::vector<openvdb::Vec3d>& points, std::vector<openvdb::Vec3I>& triangles)
-{
-    std::vector<int> index(mesh.n_vertices(), -1);
-    points.clear();
-    triangles.clear();
-    for (auto v : mesh.vertices()) {
-        if (mesh.status(v).deleted()) continue;
-        index[v.idx()] = int(points.size());
-        const auto p = mesh.point(v);
-        points.emplace_back(p[0], p[1], p[2]);
-    }
-    for (auto f : mesh.faces()) {
-        if (mesh.status(f).deleted()) continue;
-        openvdb::Vec3I t;
-        int n = 0;
-        for (auto v : mesh.fv_range(f)) t[n++] = openvdb::Index32(index[v.idx()]);
-        if (n == 3) triangles.push_back(t);
-    }
-}
-
-/// World points to the index space that meshToVolume's adapter expects.
-std::vector<openvdb::Vec3s> toIndexSpace(const std::vector<openvdb::Vec3d>& world, const openvdb::math::Transform& xform)
-{
-    std::vector<openvdb::Vec3s> points;
-    points.reserve(world.size());
-    for (const auto& p : world) points.push_back(openvdb::Vec3s(xform.worldToIndex(p)));
-    return points;
-}
-
-} // namespace
-
-openvdb::FloatGrid::Ptr meshToSurfaceLevelSet(const Mesh& mesh, const openvdb::math::Transform& transform,
-                                              float halfWidth)
-{
-    initialize();
-    std::vector<openvdb::Vec3d> world;
-    std::vector<openvdb::Vec3I> triangles;
-    meshArrays(mesh, world, triangles);
-    const std::vector<openvdb::Vec3s> points = toIndexSpace(world, transform);
-    // Points are in index space (what the adapter expects); distances come out in world units.
-    openvdb::tools::QuadAndTriangleDataAdapter<openvdb::Vec3s, openvdb::Vec3I> adapter(points, triangles);
-    auto grid = openvdb::tools::meshToVolume<openvdb::FloatGrid>(adapter, transform, halfWidth, halfWidth);
-    grid->setTransform(transform.copy());
-    grid->setName("surface");
-    grid->setGridClass(openvdb::GRID_LEVEL_SET);
-    return grid;
-}
-
-SurfaceError surfaceError(const Mesh& mesh, const openvdb::FloatGrid& sdf)
-{
-    std::vector<openvdb::Vec3d> points;
-    std::vector<openvdb::Vec3I> triangles;
-    meshArrays(mesh, points, triangles);
-    return surfaceError(points, triangles, sdf);
-}
-
-SurfaceError surfaceError(const std::vector<openvdb::Vec3d>& worldPoints, const std::vector<openvdb::Vec3I>& triangles,
-                          const openvdb::FloatGrid& sdf)
-{
-    initialize();
-    SurfaceError err;
-    const auto& xform = sdf.transform();
-    // Mesh -> surface: |sdf| at the vertices.
-    {
-        openvdb::tools::GridSampler<openvdb::FloatGrid, openvdb::tools::BoxSampler> sampler(sdf);
-        double sum = 0;
-        for (const auto& p : worldPoints) {
-            const double d = std::abs(sampler.wsSample(p));
-            sum += d;
-            err.maxVertexDistance = std::max(err.maxVertexDistance, d);
-        }
-        err.meanVertexDistance = worldPoints.empty() ? 0.0 : sum / double(worldPoints.size());
-    }
-    // Surface -> mesh: reference points on sdf = 0, distance read from the mesh's signed distance.
-    {
-        const std::vector<openvdb::Vec3s> points = toIndexSpace(worldPoints, xform);
-        openvdb::tools::QuadAndTriangleDataAdapter<openvdb::Vec3s, openvdb::Vec3I> adapter(points, triangles);
-        // A signed distance (the mesh is closed) interpolates linearly across the surface, where an
-        // unsigned one would read up to half a voxel too far. Farther than the band reads the band.
-        const float band = 16.0f; // voxels
-        auto udf = openvdb::tools::meshToVolume<openvdb::FloatGrid>(adapter, xform, band, band);
-        openvdb::tools::GridSampler<openvdb::FloatGrid, openvdb::tools::BoxSampler> udfSampler(*udf);
-        openvdb::tools::GridSampler<openvdb::FloatGrid, openvdb::tools::BoxSampler> sdfSampler(sdf);
-        const double h = xform.voxelSize()[0];
-        for (auto it = sdf.tree().cbeginValueOn(); it; ++it) {
-            if (!it.isVoxelValue() || std::abs(*it) >= 0.5 * h) continue;
-            const openvdb::Coord c = it.getCoord();
-            const openvdb::Vec3d x = xform.indexToWorld(c);
-            // Gradient of the sdf by central differences (unit length for an exact distance).
-            openvdb::Vec3d g;
-            for (int a = 0; a < 3; ++a) {
-                openvdb::Vec3d e(0);
-                e[a] = h;
-                g[a] = (sdfSampler.wsSample(x + e) - sdfSampler.wsSample(x - e)) / (2 * h);
-            }
-            if (g.length() < 1e-6) continue;
-            g.normalize();
-            const openvdb::Vec3d onSurface = x - double(*it) * g;
-            const double d = std::abs(udfSampler.wsSample(onSurface));
-            err.maxSurfaceDistance = std::max(err.maxSurfaceDistance, d);
-            ++err.samples;
-        }
-    }
-    err.hausdorff = std::max(err.maxVertexDistance, err.maxSurfaceDistance);
-    return err;
 }
 
 } // namespace riemesh::vdb

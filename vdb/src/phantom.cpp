@@ -161,9 +161,14 @@ Phantom makePhantom(PhantomShape shape, const PhantomOptions& options)
     const auto transform = openvdb::math::Transform::createLinearTransform(1.0);
     out.density->setTransform(transform);
     out.sdf->setTransform(transform->copy());
-    out.density->insertMeta("riemesh:phantom", openvdb::StringMetadata(phantomShapeNames()[int(shape)]));
     out.density->insertMeta("riemesh:noise", openvdb::DoubleMetadata(options.noise));
     out.density->insertMeta("riemesh:seed", openvdb::Int64Metadata(std::int64_t(options.seed)));
+    // The shape and size on both grids: a reference measure (level_set.h, phantomReferenceDistance)
+    // then evaluates the analytic distance, exact at edges and corners, instead of interpolating.
+    for (const auto& grid : {out.density, out.sdf}) {
+        grid->insertMeta("riemesh:phantom", openvdb::StringMetadata(phantomShapeNames()[int(shape)]));
+        grid->insertMeta("riemesh:size", openvdb::Int32Metadata(n));
+    }
     return out;
 }
 

@@ -450,12 +450,15 @@ std::vector<std::string> phantomShapes() { return phantomShapeNames(); }
 ReferenceError compareToReference(const Mesh& mesh, const std::string& path, const std::string& gridName)
 {
     auto sdf = readVdbImage(path, gridName);
-    const auto e = surfaceError(mesh, *sdf);
+    const ReferenceDistance exact = phantomReferenceDistance(*sdf);
+    const auto e = surfaceError(mesh, *sdf, exact);
     ReferenceError r;
-    r.mean = e.meanVertexDistance;
-    r.maxVertex = e.maxVertexDistance;
-    r.maxSurface = e.maxSurfaceDistance;
+    r.meanMeshToSurface = e.meanMeshToSurface;
+    r.maxMeshToSurface = e.maxMeshToSurface;
+    r.meanSurfaceToMesh = e.meanSurfaceToMesh;
+    r.maxSurfaceToMesh = e.maxSurfaceToMesh;
     r.hausdorff = e.hausdorff;
+    r.analytic = bool(exact);
     r.voxelSize = sdf->transform().voxelSize()[0];
     return r;
 }

@@ -6,6 +6,7 @@
 #include <openvdb/openvdb.h>
 
 #include <cstddef>
+#include <functional>
 #include <vector>
 
 namespace riemesh::vdb {
@@ -16,22 +17,39 @@ namespace riemesh::vdb {
 openvdb::FloatGrid::Ptr meshToSurfaceLevelSet(const Mesh& mesh, const openvdb::math::Transform& transform,
                                               float halfWidth = 3.0f);
 
-/// Distances between a mesh and a reference surface given by its signed distance grid `sdf`
-/// (e.g. a phantom's "sdf" grid), in world units.
+/// A reference surface's signed distance (world units, negative inside) as a factory of evaluators:
+/// each call returns an evaluator for one thread (grid samplers cache nodes and are not shared).
+using ReferenceDistance = std::function<std::function<double(const openvdb::Vec3d&)>()>;
+/// Trilinear interpolation of a signed distance grid.
+ReferenceDistance gridDistance(openvdb::FloatGrid::ConstPtr sdf);
+/// The analytic distance of a phantom (phantom.h) when `grid` carries the metadata vdbphantom writes
+/// ("riemesh:phantom", "riemesh:size"), exact at creases and corners; empty otherwise.
+ReferenceDistance phantomReferenceDistance(const openvdb::GridBase& grid);
+
+/// Two-sided distances between a mesh and a reference surface, world units, from dense samples of
+/// both surfaces (see surface_error.cpp):
+/// - mesh -> surface: about 4 points per square voxel over every triangle (vertices, edges and
+///   interiors), |distance| from the reference, mean weighted by area;
+/// - surface -> mesh: points on the reference surface, its creases and corners included (a voxel/3
+///   lattice in the band |sdf| < 1 voxel projected onto sdf = 0, one point per half-voxel cell),
+///   exact distance to the nearest triangle.
+/// Distances beyond 16 voxels read as 16 voxels (a missed part).
 struct SurfaceError {
-    double meanVertexDistance = 0;   ///< mean over mesh vertices of |sdf| (mesh -> surface)
-    double maxVertexDistance = 0;    ///< max over mesh vertices of |sdf|
-    double maxSurfaceDistance = 0;   ///< max over reference surface points of the distance to the mesh
-    double hausdorff = 0;            ///< max of the two one-sided maxima
-    std::size_t samples = 0;         ///< reference surface points used
+    double meanMeshToSurface = 0;  ///< area-weighted mean over the mesh's samples
+    double maxMeshToSurface = 0;
+    double meanSurfaceToMesh = 0;  ///< mean over the reference surface's samples
+    double maxSurfaceToMesh = 0;
+    double hausdorff = 0;          ///< max of the two one-sided maxima
+    std::size_t meshSamples = 0, surfaceSamples = 0;
 };
-/// Reference surface points are the projections onto sdf = 0 of the voxels with |sdf| < voxel/2;
-/// their distance to the mesh is read (trilinearly) from a signed distance grid of the closed mesh with
-/// the sdf's transform and a band of 16 voxels (larger distances read as 16 voxels).
-SurfaceError surfaceError(const Mesh& mesh, const openvdb::FloatGrid& sdf);
+/// `sdf` seeds the surface samples (its voxels with |value| < 1 voxel) and gives the distance unless
+/// `exact` is given (e.g. phantomReferenceDistance), which then gives every distance. Interpolated
+/// between voxel centres, a grid's distance rounds the reference's own corners (a box's by ~0.5
+/// voxel): only an exact distance puts samples on them.
+SurfaceError surfaceError(const Mesh& mesh, const openvdb::FloatGrid& sdf, const ReferenceDistance& exact = {});
 /// The same for any closed triangle mesh given as arrays (world-space points, vertex indices), such
 /// as another mesher's output, so that every mesher is measured by the same code.
 SurfaceError surfaceError(const std::vector<openvdb::Vec3d>& worldPoints, const std::vector<openvdb::Vec3I>& triangles,
-                          const openvdb::FloatGrid& sdf);
+                          const openvdb::FloatGrid& sdf, const ReferenceDistance& exact = {});
 
 } // namespace riemesh::vdb

@@ -122,9 +122,13 @@ private:
 };
 
 /// Accuracy of `mesh` against a reference signed distance grid (default grid "sdf") in a .vdb file,
-/// in world units (see level_set.h).
+/// in world units, both ways from dense samples of both surfaces (level_set.h: surfaceError). A
+/// phantom's sdf grid (vdbphantom) is measured against the phantom's analytic distance.
 struct ReferenceError {
-    double mean = 0, maxVertex = 0, maxSurface = 0, hausdorff = 0, voxelSize = 1;
+    double meanMeshToSurface = 0, maxMeshToSurface = 0; ///< mesh samples to the reference surface
+    double meanSurfaceToMesh = 0, maxSurfaceToMesh = 0; ///< reference surface samples to the mesh
+    double hausdorff = 0, voxelSize = 1;
+    bool analytic = false; ///< measured against a phantom's analytic distance (else the grid's, trilinear)
 };
 ReferenceError compareToReference(const Mesh& mesh, const std::string& path, const std::string& gridName = "sdf");
 
