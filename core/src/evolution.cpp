@@ -57,6 +57,60 @@ Box3 initialBoxBounds(const ScalarImage& image, double grow, const char* who)
     return box;
 }
 
+/// Where the image says the object is: +1 object, -1 background, 0 unclear (within `margin` of
+/// the isovalue; see keepSettledPairsApart).
+int imageSide(const ScalarImage& image, const ForceOptions& forces, const Vec3& x)
+{
+    const double object = (forces.objectBrighter ? 1.0 : -1.0) * (image.value(x) - forces.iso);
+    return object > 0 ? 1 : object < 0 ? -1 : 0;
+}
+
+/// Colliding pairs whose two sheets already hold what the image says lies between them become
+/// contacts (held apart, see step()) instead of merges. A merge removes what lies between the two
+/// sheets near the pair: the mesh's inside when their normals point away from each other (a hole
+/// through the enclosed volume), its outside when they face each other (the gap is filled). That
+/// is right only across background, respectively object: the two faces of a plate thinner than
+/// the collision radius must not merge through the plate, nor two objects closer than it join. A
+/// 3-voxel plate at noise 0.8 otherwise merged and cut at its rim until the iteration cap. Pairs
+/// whose image in between is unclear (three samples not all on one side) merge as before.
+void keepSettledPairsApart(const Mesh& mesh, const ScalarImage& image, const ForceOptions& forces,
+                           std::vector<CollisionPair>& collisions, std::vector<CollisionPair>& contacts)
+{
+    std::size_t kept = 0;
+    for (const CollisionPair& c : collisions) {
+        const Vec3 u = position(mesh, c.u), e = position(mesh, c.w) - u;
+        const double au = vertexNormal(mesh, c.u).dot(e), aw = vertexNormal(mesh, c.w).dot(e);
+        const int between = au < 0 && aw > 0 ? 1 : au > 0 && aw < 0 ? -1 : 0; // inside between: 1
+        bool settled = between != 0;
+        for (double t : {0.25, 0.5, 0.75})
+            if (settled && imageSide(image, forces, u + t * e) != between) settled = false;
+        if (settled)
+            contacts.push_back(c);
+        else
+            collisions[kept++] = c;
+    }
+    collisions.resize(kept);
+}
+
+/// Tunnel cuts (Fig. 3b) remove a neck of the enclosed volume: the disc the loop u, v, w spans lies
+/// inside it. Where the image says that disc is object (its centre and the midpoints towards its
+/// three corners), the neck is the object's own (a plate thinner than the model's edges, seen
+/// edge-on): it stays, and the short edge with it.
+void keepObjectNecks(const Mesh& mesh, const ScalarImage& image, const ForceOptions& forces,
+                     std::vector<TunnelCandidate>& tunnels)
+{
+    std::size_t kept = 0;
+    for (const TunnelCandidate& t : tunnels) {
+        const Vec3 a = position(mesh, t.u), b = position(mesh, t.v), c = position(mesh, t.w);
+        const Vec3 centre = (a + b + c) / 3.0;
+        bool object = imageSide(image, forces, centre) > 0;
+        for (const Vec3* corner : {&a, &b, &c})
+            if (object && imageSide(image, forces, 0.5 * (centre + *corner)) <= 0) object = false;
+        if (!object) tunnels[kept++] = t;
+    }
+    tunnels.resize(kept);
+}
+
 /// Free flight at most this fraction of vmax (see step()).
 constexpr double kCreaseRoom = 0.70710678118654752;
 
@@ -153,7 +207,8 @@ IterationStats Evolution::step()
         ro.delta = c * o.delta;
         ro.zeta = o.zeta / c;
     }
-    const RegularityStats rs = enforceRegularity(mMesh, mMetric, ro);
+    RegularityStats rs = enforceRegularity(mMesh, mMetric, ro);
+    keepObjectNecks(mMesh, image, o.forces, rs.tunnels);
     phase(it.phases.regularity);
 
     CollisionOptions co;
@@ -161,7 +216,8 @@ IterationStats Evolution::step()
     co.zeta = o.zeta;
     co.vmax = vmax;
     std::vector<CollisionPair> contacts;
-    const auto collisions = findCollisions(mMesh, mMetric, co, &contacts);
+    auto collisions = findCollisions(mMesh, mMetric, co, &contacts);
+    keepSettledPairsApart(mMesh, image, o.forces, collisions, contacts);
     phase(it.phases.collisions);
     TopologyStats ts;
     if (!collisions.empty() || !rs.tunnels.empty()) {
