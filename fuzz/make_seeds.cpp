@@ -8,6 +8,8 @@
 #include "riemesh/vdb/nano.h"
 #include "riemesh/vdb/phantom.h"
 
+#include "isolated_read.h"
+
 #include <nifti2_io.h>
 
 #include <cstdio>
@@ -65,7 +67,7 @@ int main(int argc, char** argv)
     }
     try {
         const fs::path out(argv[1]);
-        for (const char* t : {"vdb_read", "nvdb_read", "nifti_read", "mesh_read", "vdb2mesh_args"})
+        for (const char* t : {"vdb_read", "vdb_answer", "nvdb_read", "nifti_read", "mesh_read", "vdb2mesh_args"})
             fs::create_directories(out / t);
 
         // .vdb: small phantoms (fog density + level set sdf), and a double grid.
@@ -80,6 +82,10 @@ int main(int argc, char** argv)
         d->setName("double");
         for (int i = 0; i < 4; ++i) d->tree().setValue(openvdb::Coord(i, i, 2 * i), 1.0 + i);
         vdb::writeVdb((out / "vdb_read/double.vdb").string(), {d});
+        // The isolated reader's answers for them (vdb/src/isolated_read.h).
+        std::ofstream(out / "vdb_answer/ball_density.bin", std::ios::binary) << vdb::detail::childAnswerOf(*ball.density);
+        std::ofstream(out / "vdb_answer/torus_sdf.bin", std::ios::binary) << vdb::detail::childAnswerOf(*torus.sdf);
+        std::ofstream(out / "vdb_answer/double.bin", std::ios::binary) << vdb::detail::childAnswerOf(*d);
 
         // .nvdb: the image alone, and with its metric (as vdb2mesh --export-nvdb writes it).
         vdb::writeNvdb((out / "nvdb_read/ball.nvdb").string(), *ball.density);

@@ -4,6 +4,8 @@
 #include "riemesh/vdb/nano.h"
 #include "riemesh/vdb/phantom.h"
 
+#include "corrupt_vdb.h"
+
 #include <nifti2_io.h>
 
 #include <openvdb/io/File.h>
@@ -248,6 +250,24 @@ TEST_CASE("vdb2mesh: every bad input exits 1 with one line naming the problem an
         CHECK(slurp(out) == "precious");
         CHECK(f.fileCount() == before);
     }
+}
+
+TEST_CASE("vdb2mesh: a file that overflows a heap buffer inside OpenVDB's reader ends in exit 1 and one clear line (issue 17)")
+{
+    // Before issue 17: "double free or corruption (out)" or "munmap_chunk(): invalid pointer", exit 134.
+    Fixture f;
+    REQUIRE(riemesh::test::writeHeapOverflowVdb(f.path("overflow.vdb")));
+    const std::string out = f.path("out.ply");
+    { std::ofstream(out) << "precious"; }
+    const std::size_t before = f.fileCount();
+    const Run r = f.run(RIEMESH_VDB2MESH_EXE, f.path("overflow.vdb") + " " + out);
+    INFO("stderr: " << r.err);
+    CHECK(r.code == 1);
+    CHECK(lineCount(r.err) == 1);
+    CHECK(r.err.rfind("vdb2mesh: error: '" + f.path("overflow.vdb") + "': corrupt or unreadable VDB file (", 0) == 0);
+    CHECK(r.out.empty());
+    CHECK(slurp(out) == "precious");
+    CHECK(f.fileCount() == before);
 }
 
 TEST_CASE("vdb2mesh: a read-only output folder is refused up front")

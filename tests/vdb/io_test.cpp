@@ -11,10 +11,12 @@
 #include "riemesh/vdb/pipeline.h"
 #include "riemesh/vdb/volume.h"
 
+#include "corrupt_vdb.h"
 #include "mesh_invariants.h"
 
 #include <nifti2_io.h>
 
+#include <openvdb/io/File.h>
 #include <openvdb/tools/Composite.h>
 #include <openvdb/tools/LevelSetSphere.h>
 
@@ -194,6 +196,127 @@ TEST_CASE("vdb: round trip of an image, and double grids read as float")
     auto f = readVdbImage(dir / "d.vdb");
     CHECK(f->getConstAccessor().getValue(Coord(2, 2, 3)) == 0.75f);
     CHECK(f->activeVoxelCount() == 3);
+}
+
+namespace {
+
+/// Every value of `a` (voxels and tiles, active or not) reads the same in `b`, with the same activity.
+void checkSameValues(const openvdb::FloatGrid& a, const openvdb::FloatGrid& b)
+{
+    auto acc = b.getConstAccessor();
+    std::size_t checked = 0, differ = 0;
+    for (auto it = a.cbeginValueAll(); it; ++it) {
+        const Coord c = it.getCoord();
+        if (acc.getValue(c) != *it || acc.isValueOn(c) != it.isValueOn()) ++differ;
+        ++checked;
+    }
+    CHECK(checked > 0);
+    CHECK(differ == 0);
+}
+
+} // namespace
+
+TEST_CASE("vdb: the isolated read hands back the grid unchanged (values, tiles, activity, name, class, background, transform)")
+{
+    TempDir dir;
+    initialize();
+    // A level set with a translated, anisotropic voxel; a fog with an active root tile, an inactive
+    // tile of another value and a ball; a rotated (affine) one; a double grid.
+    auto sphere = openvdb::tools::createLevelSetSphere<openvdb::FloatGrid>(20.0f, openvdb::Vec3f(3, 4, 5), 0.5f, 3.0f);
+    sphere->setName("sdf");
+    sphere->setTransform(openvdb::math::Transform::createLinearTransform(0.5));
+    sphere->transform().postTranslate(openvdb::Vec3d(0.25, -1.5, 7));
+    auto fog = openvdb::FloatGrid::create(0.0f);
+    fog->setName("fog");
+    fog->setGridClass(openvdb::GRID_FOG_VOLUME);
+    fog->tree().fill(openvdb::CoordBBox(Coord(4096), Coord(8191)), 0.5f, true);
+    fog->tree().addTile(1, Coord(-64, 0, 0), 0.25f, false);
+    fog->tree().addTile(2, Coord(-4096, 0, 0), 0.75f, true);
+    for (int i = 0; i < 40; ++i) fog->tree().setValueOn(Coord(i, i / 2, -i), 0.1f * float(i % 7));
+    openvdb::math::Mat4d rotation = openvdb::math::Mat4d::identity();
+    rotation.preRotate(openvdb::math::Z_AXIS, 0.3);
+    rotation.preScale(openvdb::Vec3d(1, 2, 3));
+    auto affine = fog->deepCopy();
+    affine->setName("affine");
+    affine->setTransform(openvdb::math::Transform::createLinearTransform(rotation));
+    writeVdb(dir / "grids.vdb", {sphere, fog, affine});
+    for (const auto& original : {sphere, fog, affine}) {
+        INFO(original->getName());
+        const auto read = readVdbImage(dir / "grids.vdb", original->getName());
+        CHECK(read->getName() == original->getName());
+        CHECK(read->getGridClass() == original->getGridClass());
+        CHECK(read->background() == original->background());
+        CHECK(read->transform() == original->transform());
+        CHECK(read->transform().mapType() == original->transform().mapType());
+        CHECK(read->activeVoxelCount() == original->activeVoxelCount());
+        CHECK(read->tree().leafCount() == original->tree().leafCount());
+        CHECK(read->tree().activeTileCount() == original->tree().activeTileCount());
+        checkSameValues(*original, *read);
+        checkSameValues(*read, *original);
+    }
+    auto d = openvdb::DoubleGrid::create(-2.0);
+    d->setName("dbl");
+    d->setGridClass(openvdb::GRID_LEVEL_SET);
+    d->tree().addTile(1, Coord(8, 0, 0), 2.0, false);
+    d->getAccessor().setValue(Coord(1, 2, 3), 0.1);
+    writeVdb(dir / "d.vdb", {d});
+    const auto f = readVdbImage(dir / "d.vdb");
+    CHECK(f->background() == -2.0f);
+    CHECK(f->getGridClass() == openvdb::GRID_LEVEL_SET);
+    CHECK(f->getConstAccessor().getValue(Coord(1, 2, 3)) == 0.1f);
+    CHECK(f->getConstAccessor().getValue(Coord(9, 0, 0)) == 2.0f);
+    CHECK(f->activeVoxelCount() == 1);
+}
+
+TEST_CASE("vdb: a file that overflows a heap buffer inside OpenVDB's reader is refused as corrupt, this process unharmed (issue 17)")
+{
+    TempDir dir;
+    REQUIRE(riemesh::test::writeHeapOverflowVdb(dir / "overflow.vdb"));
+    for (int i = 0; i < 3; ++i) { // the same again: nothing of the child's damage stays here
+        const std::string message = messageOf([&] { readVdbImage(dir / "overflow.vdb"); });
+        MESSAGE(message);
+        CHECK(contains(message, "overflow.vdb"));
+        CHECK(contains(message, "corrupt or unreadable VDB file"));
+        CHECK(message.find('\n') == std::string::npos);
+    }
+    // This process reads good files as before.
+    PhantomOptions o;
+    o.size = 20;
+    const Phantom p = makePhantom(PhantomShape::Ball, o);
+    writeVdb(dir / "good.vdb", {p.density});
+    CHECK(readVdbImage(dir / "good.vdb")->activeVoxelCount() == p.density->activeVoxelCount());
+}
+
+TEST_CASE("vdb: a reader that runs past its memory limit is refused with the limit named")
+{
+    TempDir dir;
+    initialize();
+    // 64 MB of leaf nodes, written without the statistics that let the budget refuse it unread.
+    auto g = openvdb::FloatGrid::create(0.0f);
+    g->setName("dense");
+    g->tree().fill(openvdb::CoordBBox(Coord(0), Coord(255)), 1.0f, true);
+    g->tree().voxelizeActiveTiles();
+    {
+        openvdb::io::File file(dir / "dense.vdb");
+        file.setGridStatsMetadataEnabled(false);
+        file.write({g});
+        file.close();
+    }
+    const std::string message = messageOf([&] { readVdbImage(dir / "dense.vdb", "", std::uint64_t(16) << 20); });
+    MESSAGE(message);
+    CHECK(contains(message, "dense.vdb"));
+#if defined(__SANITIZE_ADDRESS__)
+    // AddressSanitizer's allocator ends a process whose mmap fails instead of throwing bad_alloc.
+    CHECK((contains(message, "ran out of the 16 MB memory limit") || contains(message, "the reader crashed")));
+#elif defined(__has_feature)
+#if __has_feature(address_sanitizer)
+    CHECK((contains(message, "ran out of the 16 MB memory limit") || contains(message, "the reader crashed")));
+#else
+    CHECK(contains(message, "corrupt or unreadable VDB file (ran out of the 16 MB memory limit)"));
+#endif
+#else
+    CHECK(contains(message, "corrupt or unreadable VDB file (ran out of the 16 MB memory limit)"));
+#endif
 }
 
 TEST_CASE("nvdb: image and metric survive the round trip through NanoVDB")

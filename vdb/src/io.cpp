@@ -6,6 +6,8 @@
 #include "riemesh/vdb/nifti.h"
 #include "riemesh/vdb/volume.h"
 
+#include "isolated_read.h"
+
 #include <openvdb/io/File.h>
 #include <openvdb/tree/LeafManager.h>
 
@@ -150,19 +152,6 @@ openvdb::FloatGrid::Ptr checkedImage(openvdb::FloatGrid::Ptr grid, const std::st
     return grid;
 }
 
-openvdb::FloatGrid::Ptr toFloatGrid(const openvdb::GridBase::Ptr& base)
-{
-    if (auto f = openvdb::GridBase::grid<openvdb::FloatGrid>(base)) return f;
-    auto d = openvdb::GridBase::grid<openvdb::DoubleGrid>(base);
-    // Value-converting deep copy (double -> float), tiles and activity preserved.
-    auto tree = openvdb::FloatTree::Ptr(new openvdb::FloatTree(d->tree()));
-    auto f = openvdb::FloatGrid::create(tree);
-    f->setTransform(d->transform().copy());
-    f->setName(d->getName());
-    f->setGridClass(d->getGridClass());
-    return f;
-}
-
 } // namespace
 
 std::uint64_t estimatePipelineBytes(std::uint64_t imageBytes, bool levelSet)
@@ -194,15 +183,21 @@ void checkMemoryBudget(const std::string& path, const VoxelDims& dims, std::uint
                               " of memory, more than the budget of " + byteSize(double(budgetBytes)) + " (--max-memory)");
 }
 
-openvdb::FloatGrid::Ptr readVdbImage(const std::string& path, const std::string& gridName, std::uint64_t memoryBudget)
+namespace {
+
+/// The grid of a .vdb file that readVdbImage returns, as OpenVDB reads it (float or double, linear
+/// transform, finite background): the part that runs in the isolated child (isolated_read.h), where
+/// a file that corrupts OpenVDB's memory can only kill the child. No TBB here (see there).
+openvdb::GridBase::ConstPtr readChosenVdbGrid(const std::string& path, const std::string& gridName,
+                                              std::uint64_t memoryBudget)
 {
-    initialize();
-    checkReadableFile(path);
     openvdb::io::File file(path);
     openvdb::GridPtrVecPtr metas;
     try {
         file.open(/*delayLoad=*/false);
         metas = file.readAllGridMetadata();
+    } catch (const std::bad_alloc&) {
+        throw; // the child's memory limit: reported as such
     } catch (const std::exception& e) {
         throw fileError(path, describeVdbFailure(e.what()));
     }
@@ -231,15 +226,37 @@ openvdb::FloatGrid::Ptr readVdbImage(const std::string& path, const std::string&
     try {
         base = file.readGrid(chosen->getName());
         file.close();
+    } catch (const std::bad_alloc&) {
+        throw;
     } catch (const std::exception& e) {
         throw fileError(path, describeVdbFailure(e.what()));
     }
     if (!base) throw fileError(path, "could not read grid '" + chosen->getName() + "'");
-    auto grid = toFloatGrid(base);
-    if (!grid->transform().isLinear())
-        throw fileError(path, "grid '" + grid->getName() + "' has a non-linear (frustum) transform");
+    if (!base->transform().isLinear())
+        throw fileError(path, "grid '" + base->getName() + "' has a non-linear (frustum) transform");
+    const double background = base->isType<openvdb::FloatGrid>()
+                                  ? double(openvdb::gridPtrCast<openvdb::FloatGrid>(base)->background())
+                                  : openvdb::gridPtrCast<openvdb::DoubleGrid>(base)->background();
+    if (!std::isfinite(background) || !std::isfinite(float(background)))
+        throw fileError(path, "grid '" + base->getName() + "' has a non-finite background value");
+    return base;
+}
+
+} // namespace
+
+/// The least memory the isolated reader child gets, whatever the budget.
+constexpr std::uint64_t kMinReaderBytes = std::uint64_t(16) << 20;
+
+openvdb::FloatGrid::Ptr readVdbImage(const std::string& path, const std::string& gridName, std::uint64_t memoryBudget)
+{
+    initialize(); // before the fork: the child only reads
+    checkReadableFile(path);
+    // The child may use the budget, and at least what opening a file and reading its metadata
+    // takes (so that a small --max-memory is refused by the budget's message, with the sizes).
+    const std::uint64_t childLimit = std::max(memoryBudget ? memoryBudget : defaultMemoryBudget(), kMinReaderBytes);
+    auto grid = detail::readGridInChild(path, childLimit, [&] { return readChosenVdbGrid(path, gridName, memoryBudget); });
     checkedImage(grid, path);
-    checkMemoryBudget(path, grid->memUsage(), levelSet, memoryBudget);
+    checkMemoryBudget(path, grid->memUsage(), grid->getGridClass() == openvdb::GRID_LEVEL_SET, memoryBudget);
     return grid;
 }
 

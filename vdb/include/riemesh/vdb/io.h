@@ -56,6 +56,12 @@ void checkMemoryBudget(const std::string& path, const VoxelDims& dims, std::uint
 /// is a scalar float/double grid, has active voxels, and all its active values are finite. With a
 /// `memoryBudget` (bytes, 0 = none), a grid whose bounding box exceeds it is refused from the file's
 /// statistics before its voxels are read (and from its real box after, for files without them).
+/// OpenVDB reads the file in a forked child process limited to the budget (at least 16 MB; no
+/// budget: half the physical memory), which hands the grid back as a flat buffer that this process
+/// checks before it builds the grid: a file that makes OpenVDB crash or corrupt its memory (10.0.1
+/// overflows a heap buffer on some corrupt Blosc blocks) is refused as "corrupt or unreadable VDB
+/// file (the reader crashed: signal N...)", one that makes it exceed the limit as "(ran out of the
+/// N MB memory limit)".
 openvdb::FloatGrid::Ptr readVdbImage(const std::string& path, const std::string& gridName = {},
                                      std::uint64_t memoryBudget = 0);
 
