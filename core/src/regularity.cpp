@@ -21,6 +21,7 @@
 #include "riemesh/edge_ops.h"
 
 #include "detail/edge_guards.h"
+#include "detail/parallel.h"
 
 #include <algorithm>
 #include <array>
@@ -49,6 +50,9 @@ constexpr double kDelaunayTolerance = 1e-2;
 constexpr double kFlipFlatCosine = 0.9;
 
 int squared(int x) { return x * x; }
+
+/// Elements per parallel chunk.
+constexpr std::size_t kGrain = 128;
 
 /// A loop u-v-w that cuts off at most this many vertices is a cap (a dent or a pimple of the
 /// sampling), dissolved by collapses; a loop with more on both sides is a tunnel.
@@ -100,17 +104,26 @@ public:
     {
         mLong.clear();
         mShort.clear();
-        mValence.assign(mMesh.n_vertices(), 0);
         const int edgeCount = int(mMesh.n_edges());
+        const int vertexCount = int(mMesh.n_vertices());
+        mValence.assign(std::size_t(vertexCount), 0);
         mClass.assign(std::size_t(edgeCount), kFits);
-        for (int i = 0; i < edgeCount; ++i) {
-            const EdgeHandle e(i);
-            if (mMesh.status(e).deleted()) continue;
-            const HalfedgeHandle h = mMesh.halfedge_handle(e, 0);
-            ++mValence[mMesh.from_vertex_handle(h).idx()];
-            ++mValence[mMesh.to_vertex_handle(h).idx()];
-            classify(i);
-        }
+        // In parallel: G at every vertex first (so that measuring only reads the cache), then each
+        // vertex's valence and each edge's class; the long and short edges are then queued in edge
+        // order, as one pass over the edges would.
+        mVertexMetrics.update();
+        const bool vertexStatus = mMesh.has_vertex_status();
+        int* const valence = mValence.data();
+        detail::parallelFor(0, std::size_t(vertexCount), kGrain, [&](std::size_t i) {
+            const VertexHandle v{int(i)};
+            if (!(vertexStatus && mMesh.status(v).deleted())) valence[i] = int(mMesh.valence(v));
+        });
+        signed char* const edgeClass = mClass.data();
+        detail::parallelFor(0, std::size_t(edgeCount), kGrain, [&](std::size_t i) {
+            if (!mMesh.status(EdgeHandle(int(i))).deleted()) edgeClass[i] = measureClass(int(i));
+        });
+        for (int i = 0; i < edgeCount; ++i)
+            if (edgeClass[i] != kFits) queue(i, edgeClass[i]);
         mEdges.clear();
         clearTouched();
     }
@@ -155,24 +168,42 @@ public:
         return {tooLong, tooShort};
     }
 
-    /// Records edge i's class and queues it when it is too long or too short.
-    void classify(int i)
+    /// The class of edge i by its metric length (reads only: safe in parallel once every vertex's
+    /// G is cached). With a Euclidean metric the squared length is compared with the squared
+    /// bounds (the same classification as metricLength, without a call and a square root per edge).
+    signed char measureClass(int i) const
     {
         const EdgeHandle e(i);
-        signed char& c = mClass[std::size_t(i)];
-        c = kFits;
         if (mMetric.isEuclidean()) {
             const HalfedgeHandle h = mMesh.halfedge_handle(e, 0);
             const Mesh::Point* points = mMesh.points();
             const double l2 = (points[mMesh.to_vertex_handle(h).idx()] - points[mMesh.from_vertex_handle(h).idx()]).sqrnorm();
-            if (l2 > mHi * mHi) mLong.push_back({length(e), std::sqrt(l2), i}), c = kLong;
-            else if (l2 < mLo * mLo) mShort.push_back({length(e), std::sqrt(l2), i}), c = kShort;
+            return l2 > mHi * mHi ? kLong : l2 < mLo * mLo ? kShort : kFits;
+        }
+        const double l = length(e);
+        return l > mHi ? kLong : l < mLo ? kShort : kFits;
+    }
+
+    /// Records edge i's class `c` (from measureClass) and queues it when it is too long or too short.
+    void queue(int i, signed char c)
+    {
+        const EdgeHandle e(i);
+        mClass[std::size_t(i)] = c;
+        if (c == kFits) return;
+        if (mMetric.isEuclidean()) {
+            const HalfedgeHandle h = mMesh.halfedge_handle(e, 0);
+            const Mesh::Point* points = mMesh.points();
+            const double l2 = (points[mMesh.to_vertex_handle(h).idx()] - points[mMesh.from_vertex_handle(h).idx()]).sqrnorm();
+            (c == kLong ? mLong : mShort).push_back({length(e), std::sqrt(l2), i});
         } else {
             const double l = length(e);
-            if (l > mHi) mLong.push_back({l, euclideanLength(e), i}), c = kLong;
-            else if (l < mLo) mShort.push_back({l, l, i}), c = kShort;
+            if (c == kLong) mLong.push_back({l, euclideanLength(e), i});
+            else mShort.push_back({l, l, i});
         }
     }
+
+    /// Records edge i's class and queues it when it is too long or too short.
+    void classify(int i) { queue(i, measureClass(i)); }
 
     /// Marks v as changed by this pass: the next pass re-examines the edges of its faces.
     void touch(VertexHandle v)
