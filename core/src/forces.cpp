@@ -4,6 +4,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <utility>
 #include <vector>
 
 namespace riemesh {
@@ -78,23 +79,25 @@ void computeForces(const Mesh& mesh, const ScalarImage& image, const ForceOption
             edgeWeight[ei] = euclid > 0 ? metricLength(tensor[va.idx()], tensor[vb.idx()], d) / euclid : 1.0;
         });
     detail::parallelForChunks(0, n, kGrain, [&](std::size_t begin, std::size_t end) {
-        std::vector<int> ring; // face, then edge indices around one vertex, sorted
+        // One turn around each vertex: its faces, and its edges with the vertex across each.
+        std::vector<int> faces;
+        std::vector<std::pair<int, int>> edges;
         for (std::size_t i = begin; i < end; ++i) {
             const VertexHandle v{int(i)};
             if (deleted(v)) continue;
-            ring.clear();
-            for (auto f = mesh.cvf_begin(v); f.is_valid(); ++f) ring.push_back(f->idx());
-            std::sort(ring.begin(), ring.end());
-            for (const int f : ring) normal[i] += faceNormal[f];
-            ring.clear();
-            for (auto h = mesh.cvoh_begin(v); h.is_valid(); ++h) ring.push_back(mesh.edge_handle(*h).idx());
-            std::sort(ring.begin(), ring.end());
-            for (const int ei : ring) {
-                const auto h = mesh.halfedge_handle(EdgeHandle(ei), 0);
-                const VertexHandle from = mesh.from_vertex_handle(h);
-                const VertexHandle other = from == v ? mesh.to_vertex_handle(h) : from;
+            faces.clear();
+            edges.clear();
+            for (auto h = mesh.cvoh_begin(v); h.is_valid(); ++h) {
+                const FaceHandle f = mesh.face_handle(*h);
+                if (f.is_valid()) faces.push_back(f.idx());
+                edges.emplace_back(mesh.edge_handle(*h).idx(), mesh.to_vertex_handle(*h).idx());
+            }
+            std::sort(faces.begin(), faces.end());
+            std::sort(edges.begin(), edges.end());
+            for (const int f : faces) normal[i] += faceNormal[f];
+            for (const auto& [ei, other] : edges) {
                 const double w = riemannian ? edgeWeight[ei] : 1.0;
-                neighbourSum[i] += w * position(mesh, other);
+                neighbourSum[i] += w * position(mesh, VertexHandle(other));
                 weightSum[i] += w;
             }
         }
