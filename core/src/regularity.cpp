@@ -8,6 +8,8 @@
 // looks at every edge: the later ones re-examine the edges of the faces around the vertices the
 // previous pass changed (an edge away from every change keeps its length, its valences and its
 // faces, so its verdict), which keeps a call O(n + changes) however many passes it takes.
+// The first pass's measurements and flip tests run in parallel (detail/parallel.h); every edit
+// stays sequential, in the order a serial pass would make it.
 //
 // A short edge u-v whose endpoints share an outside neighbour w is not collapsed (it would pinch
 // the loop u-v-w). If one side of that loop holds only a few vertices (a dent or pimple of the
@@ -301,8 +303,8 @@ public:
     /// The sweep over every edge is the one serial pass over the whole mesh a call would otherwise
     /// make: the edges a flip would be wanted at are found in parallel first (on the mesh as it is
     /// before the sweep), then the sweep visits, in edge order, only those and the edges around
-    /// every flip it makes (whose verdicts that flip may have changed). An edge it skips has the
-    /// verdict it had before the sweep, no: the same flips as a visit of every edge in order.
+    /// every flip it makes (whose verdicts that flip may have changed). An edge it skips keeps the
+    /// verdict it had before the sweep (no flip): the same flips as visiting every edge in order.
     int flipEdges(bool all)
     {
         int flips = 0;
