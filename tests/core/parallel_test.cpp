@@ -94,7 +94,8 @@ bool identical(const Outcome& a, const Outcome& b)
 {
     if (a.points.size() != b.points.size() || a.faces != b.faces || a.iterations.size() != b.iterations.size())
         return false;
-    if (std::memcmp(a.points.data(), b.points.data(), a.points.size() * sizeof(a.points[0])) != 0) return false;
+    if (!a.points.empty() && std::memcmp(a.points.data(), b.points.data(), a.points.size() * sizeof(a.points[0])) != 0)
+        return false;
     for (std::size_t i = 0; i < a.iterations.size(); ++i) {
         const IterationStats &x = a.iterations[i], &y = b.iterations[i];
         if (x.vertices != y.vertices || x.splits != y.splits || x.collapses != y.collapses || x.flips != y.flips ||
