@@ -1,10 +1,12 @@
 // core_bench: speed of the portable core on analytic images (no OpenVDB).
 //
-//   core_bench [--quick] [--scaling-only]
+//   core_bench [--quick] [--scaling-only | --parallel-only]
 //   core_bench --instructions   (the scaling sizes in instructions, under callgrind: see instructions())
 //
 // 1. Cost per iteration against the vertex count (1k, 5k, 20k, 80k vertices on a converged
 //    sphere): one full iteration = forces, integration, regularity, collision, topology.
+// 1b. The same step on 1 and on 2 threads at 20k and 80k vertices (Euclidean and a NanoVDB metric),
+//    and the speed-up.
 // 2. Full runs: a ball and the paper's phantom (a cube with a spherical cavity opening through a
 //    hole in one face), Euclidean and Riemannian (an analytic metric that stretches lengths across
 //    the contour), at a few resolutions: vertices, iterations, ms per iteration, total seconds,
@@ -13,6 +15,7 @@
 // run does not end as one converged genus-0 surface; times are printed, never checked).
 #include "riemesh/evolution.h"
 #include "riemesh/primitives.h"
+#include "riemesh/threads.h"
 
 #include <memory>
 
@@ -25,6 +28,7 @@
 
 #include <algorithm>
 #include <chrono>
+#include <ctime>
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
@@ -126,6 +130,14 @@ double now()
     return std::chrono::duration<double>(std::chrono::steady_clock::now().time_since_epoch()).count();
 }
 
+/// Processor time of the whole process (every thread), seconds.
+double processorSeconds()
+{
+    timespec t{};
+    clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &t);
+    return double(t.tv_sec) + 1e-9 * double(t.tv_nsec);
+}
+
 /// One size of the scaling table: a sphere settled at about `target` vertices whose evolution never
 /// stops (every step a full iteration), with what its timed steps measured.
 struct ScalingCase {
@@ -145,10 +157,10 @@ struct ScalingCase {
 
 /// The sizes 1k, 5k, 20k and 80k (1k and 5k when quick), settled, and a peer of the 80k row
 /// without renumbering (EvolutionOptions::renumber off).
-std::vector<ScalingCase> makeScalingCases(bool quick, const MetricField& metric)
+std::vector<ScalingCase> makeScalingCases(bool quick, const MetricField& metric,
+                                          const std::vector<int>& targets = {1000, 5000, 20000, 80000, -80000})
 {
     std::vector<ScalingCase> cases;
-    const int targets[] = {1000, 5000, 20000, 80000, -80000};
     for (int signedTarget : targets) {
         const int target = std::abs(signedTarget);
         if (quick && target > 5000) break;
@@ -246,6 +258,65 @@ void scaling(bool quick)
                 "update_normals() on a copy of the mesh, median)\n", rounds);
     std::printf("per-vertex cost, largest over smallest size: riemesh iteration %.2fx, OpenMesh update_normals %.2fx\n",
                 lastUs / firstUs, lastPeerUs / firstPeerUs);
+}
+
+/// The evolve step on 1 and on 2 threads (riemesh::setThreadCount) at 20k and 80k vertices, on the
+/// converged sphere of the scaling table, Euclidean and with a NanoVDB contour metric (the
+/// vdb2mesh code path). The thread counts take turns on the same evolving mesh (an iteration of a
+/// converged sphere costs about the same from one step to the next), so both meet the same machine;
+/// figures are medians of the timed steps, phases their means, speed-up the ratio of the medians.
+/// "cores" is the processor time the 2-thread steps used per second: on a busy machine it stays
+/// near 1, and the speed-up then says little about the code.
+void parallelScaling(bool quick)
+{
+    std::printf("\n# evolve step on 1 and 2 threads (ball image, converged sphere; %s)\n",
+                isParallel() ? "TBB" : "built without TBB: both serial");
+    std::printf("%8s %-11s %9s %9s %9s %8s %6s   %-34s %-34s\n", "target", "metric", "vertices", "ms 1T", "ms 2T", "speedup", "cores",
+                "1T: forces integr regul collis topol", "2T: forces integr regul collis topol");
+    const auto ball = [](const Vec3& x) { return ballSdf(x, Vec3::Zero(), 30); };
+    MetricGrids contour = contourMetric(ball, Box3(Vec3::Constant(-40), Vec3::Constant(40)), 4.0);
+    EuclideanMetric euclidean;
+    const std::vector<int> targets = quick ? std::vector<int>{5000} : std::vector<int>{20000, 80000};
+    for (int riemannian = 0; riemannian < 2; ++riemannian) {
+        const MetricField& metric = riemannian ? static_cast<const MetricField&>(*contour.metric) : euclidean;
+        setThreadCount(0);
+        std::vector<ScalingCase> cases = makeScalingCases(false, metric, targets);
+        for (ScalingCase& c : cases) {
+            std::vector<double> ms[2];
+            IterationStats::Phases sum[2];
+            double cpu2 = 0, wall2 = 0; // processor and wall seconds of the 2-thread steps
+            const int rounds = quick ? 2 : 7;
+            for (int round = 0; round < rounds; ++round)
+                for (int t = 0; t < 2; ++t) {
+                    setThreadCount(t + 1);
+                    c.evolution->step();
+                    for (int i = 0; i < c.stepsPerRound; ++i) {
+                        const double t0 = now(), c0 = processorSeconds();
+                        const IterationStats::Phases p = c.evolution->step().phases;
+                        ms[t].push_back((now() - t0) * 1000.0);
+                        if (t == 1) cpu2 += processorSeconds() - c0, wall2 += now() - t0;
+                        sum[t].forces += p.forces, sum[t].integration += p.integration, sum[t].regularity += p.regularity;
+                        sum[t].collisions += p.collisions, sum[t].topology += p.topology;
+                    }
+                }
+            setThreadCount(0);
+            auto median = [](std::vector<double> v) {
+                std::nth_element(v.begin(), v.begin() + long(v.size() / 2), v.end());
+                return v[v.size() / 2];
+            };
+            const double m1 = median(ms[0]), m2 = median(ms[1]);
+            char phases[2][64];
+            for (int t = 0; t < 2; ++t) {
+                const double n = double(ms[t].size());
+                std::snprintf(phases[t], sizeof phases[t], "%6.2f %6.2f %6.2f %6.2f %6.2f", sum[t].forces / n,
+                              sum[t].integration / n, sum[t].regularity / n, sum[t].collisions / n, sum[t].topology / n);
+            }
+            std::printf("%8d %-11s %9zu %9.2f %9.2f %7.2fx %6.2f   %-34s %-34s\n", c.target,
+                        riemannian ? "riemannian" : "euclidean", c.mesh->n_vertices(), m1, m2, m1 / m2,
+                        wall2 > 0 ? cpu2 / wall2 : 0.0, phases[0], phases[1]);
+            std::fflush(stdout);
+        }
+    }
 }
 
 /// --instructions: the scaling table's sizes counted in instructions instead of seconds, which the
@@ -380,9 +451,17 @@ int main(int argc, char** argv)
     if (argc > 1 && std::strcmp(argv[1], "--instructions") == 0) return instructions(argv[0]);
     // --scaling-only: just the per-iteration cost table (for profilers such as callgrind).
     const bool scalingOnly = argc > 1 && std::strcmp(argv[argc - 1], "--scaling-only") == 0;
-    std::printf("riemesh core_bench%s (one thread)\n", quick ? " --quick" : "");
-    scaling(quick);
-    if (scalingOnly) return 0;
+    // --parallel-only: just the table of 1 against 2 threads.
+    const bool parallelOnly = argc > 1 && std::strcmp(argv[argc - 1], "--parallel-only") == 0;
+    std::printf("riemesh core_bench%s (one thread but in the parallel table)\n", quick ? " --quick" : "");
+    if (!parallelOnly) {
+        setThreadCount(1);
+        scaling(quick);
+        if (scalingOnly) return 0;
+    }
+    parallelScaling(quick);
+    if (parallelOnly) return 0;
+    setThreadCount(1);
     const int unexpected = fullRuns(quick);
     if (unexpected) std::printf("\n%d run(s) did not end as expected\n", unexpected);
     return unexpected ? 1 : 0;

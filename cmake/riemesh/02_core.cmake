@@ -28,6 +28,18 @@ if(RIEMESH_THIRD_PARTY_INCLUDE)
 endif()
 target_compile_definitions(riemesh_core PUBLIC _USE_MATH_DEFINES)
 target_link_libraries(riemesh_core PUBLIC ${RIEMESH_OPENMESH_TARGET} PRIVATE riemesh_warnings)
+# Natively the core's loops run on TBB when it is found (core/src/threads.cpp, the only file that
+# includes it); under emscripten, or without TBB, they run serially (riemesh/threads.h).
+option(RIEMESH_CORE_TBB "Run the core's loops on TBB when it is found (never under emscripten)" ON)
+if(RIEMESH_CORE_TBB AND NOT EMSCRIPTEN)
+  find_package(TBB CONFIG QUIET)
+  if(TBB_FOUND)
+    target_link_libraries(riemesh_core PRIVATE TBB::tbb)
+    target_compile_definitions(riemesh_core PRIVATE RIEMESH_CORE_TBB)
+  else()
+    message(STATUS "riemesh core: TBB not found, the core runs on one thread")
+  endif()
+endif()
 # The exact predicates' expansion arithmetic needs every product rounded on its own (no fused
 # multiply-add contraction).
 if(CMAKE_CXX_COMPILER_ID MATCHES "GNU|Clang")

@@ -3,16 +3,18 @@
 // One pass over the faces for vertex normals, one sorted-grid sweep for Euclidean candidates
 // (d_E <= d_R since G >= I), then cheap per-pair filters; the bounded mesh search that tells
 // "close along the mesh" from "close across a gap" only runs for the few pairs that survive.
-// Per call, nothing is allocated once the thread's scratch buffers have grown to the mesh size.
+// Per call, little is allocated once the threads' scratch buffers have grown to the mesh size.
 #include "riemesh/collision.h"
 
 #include "detail/mesh_walk.h"
+#include "detail/parallel.h"
 #include "detail/spatial_hash.h"
 
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
 #include <stdexcept>
+#include <vector>
 
 namespace riemesh {
 
@@ -60,12 +62,19 @@ struct Scratch {
     std::vector<int> live;       ///< vertex index of each live vertex
     std::vector<double> soa;     ///< 6 arrays of `count` in slot order: x y z nx ny nz
     std::vector<int> id;         ///< vertex index of each slot
-    std::vector<std::uint32_t> near; ///< slots within the radius of the current one
-    std::vector<double> gather;  ///< one cell's half stencil: x, y, z, squared distance, slot
+    std::vector<double> faceNormal; ///< 3 per face index: its area-weighted normal
+    std::vector<std::vector<Candidate>> found; ///< candidates of each chunk of cells
     std::vector<Candidate> candidates;
+    std::vector<char> verdict;      ///< per candidate: kNotColliding, kContact or kColliding
+    std::vector<std::size_t> sources; ///< first candidate of each source vertex, then the end
     detail::CellGrid grid;
-    detail::BoundedPathSearch search;
 };
+
+/// Elements per parallel chunk, and occupied cells per chunk of the candidate sweep.
+constexpr std::size_t kGrain = 128;
+constexpr std::size_t kCellsPerChunk = 32;
+/// What the mesh search made of a candidate.
+constexpr char kNotColliding = 0, kContact = 1, kColliding = 2;
 
 Scratch& scratch()
 {
@@ -101,14 +110,17 @@ std::vector<CollisionPair> findCollisions(const Mesh& mesh, const MetricField& m
     const std::size_t n = mesh.n_vertices();
     Scratch& S = scratch();
 
-    // Area-weighted vertex normals in one pass over the faces.
+    // Area-weighted vertex normals: each face's in parallel, then summed per vertex in increasing
+    // face order (the sums one pass over the faces would make, for any thread count).
     S.normal.assign(3 * n, 0.0);
     double* const normal = S.normal.data();
     const Mesh::Point* const point = mesh.points();
     const std::size_t faceCount = mesh.n_faces();
-    for (std::size_t fi = 0; fi < faceCount; ++fi) {
+    S.faceNormal.resize(3 * faceCount);
+    double* const faceNormal = S.faceNormal.data();
+    detail::parallelFor(0, faceCount, kGrain, [&](std::size_t fi) {
         const FaceHandle f{int(fi)};
-        if (mesh.status(f).deleted()) continue;
+        if (mesh.status(f).deleted()) return;
         const HalfedgeHandle h0 = mesh.halfedge_handle(f);
         const HalfedgeHandle h1 = mesh.next_halfedge_handle(h0);
         const int a = mesh.from_vertex_handle(h0).idx(), b = mesh.to_vertex_handle(h0).idx(),
@@ -116,14 +128,24 @@ std::vector<CollisionPair> findCollisions(const Mesh& mesh, const MetricField& m
         const Mesh::Point& pa = point[a];
         const double ex = point[b][0] - pa[0], ey = point[b][1] - pa[1], ez = point[b][2] - pa[2];
         const double gx = point[c][0] - pa[0], gy = point[c][1] - pa[1], gz = point[c][2] - pa[2];
-        const double fx = ey * gz - ez * gy, fy = ez * gx - ex * gz, fz = ex * gy - ey * gx;
-        double* const na = normal + 3 * a;
-        double* const nb = normal + 3 * b;
-        double* const nc = normal + 3 * c;
-        na[0] += fx, na[1] += fy, na[2] += fz;
-        nb[0] += fx, nb[1] += fy, nb[2] += fz;
-        nc[0] += fx, nc[1] += fy, nc[2] += fz;
-    }
+        double* const fn = faceNormal + 3 * fi;
+        fn[0] = ey * gz - ez * gy, fn[1] = ez * gx - ex * gz, fn[2] = ex * gy - ey * gx;
+    });
+    detail::parallelForChunks(0, n, kGrain, [&](std::size_t begin, std::size_t end) {
+        std::vector<int> faces;
+        for (std::size_t i = begin; i < end; ++i) {
+            const VertexHandle v{int(i)};
+            if (mesh.status(v).deleted()) continue;
+            faces.clear();
+            for (auto f = mesh.cvf_begin(v); f.is_valid(); ++f) faces.push_back(f->idx());
+            std::sort(faces.begin(), faces.end());
+            double* const nv = normal + 3 * i;
+            for (const int f : faces) {
+                const double* const fn = faceNormal + 3 * std::size_t(f);
+                nv[0] += fn[0], nv[1] += fn[1], nv[2] += fn[2];
+            }
+        }
+    });
 
     // Live vertices: straight from the mesh's point array unless some are deleted.
     static_assert(sizeof(Mesh::Point) == 3 * sizeof(double), "points are 3 packed doubles");
@@ -153,7 +175,8 @@ std::vector<CollisionPair> findCollisions(const Mesh& mesh, const MetricField& m
     double* const my = mx + count;
     double* const mz = my + count;
     int* const ids = S.id.data();
-    for (std::uint32_t s = 0; s < count; ++s) {
+    detail::parallelFor(0, count, kGrain, [&](std::size_t slot) {
+        const std::uint32_t s = std::uint32_t(slot);
         const std::uint32_t i = grid.index(s);
         const int v = live ? live[i] : int(i);
         ids[s] = v;
@@ -166,77 +189,93 @@ std::vector<CollisionPair> findCollisions(const Mesh& mesh, const MetricField& m
         mx[s] = nx * inv;
         my[s] = ny * inv;
         mz[s] = nz * inv;
-    }
+    });
 
-    S.candidates.clear();
-    S.near.resize(count);
-    std::uint32_t* const near = S.near.data();
     const double r2 = radius * radius;
     const bool euclidean = metric.isEuclidean();
-    auto consider = [&](std::uint32_t sa, std::uint32_t sb, double d2, bool crease) {
-        const int a = ids[sa], b = ids[sb];
-        if (hasCutIds) {
-            const int ca = mesh.property(cutId, VertexHandle(a));
-            if (ca != 0 && ca == mesh.property(cutId, VertexHandle(b))) return;
-        }
-        const int u = std::min(a, b), w = std::max(a, b);
-        double dR = std::sqrt(d2);
-        if (!euclidean) {
-            dR = metricLength(metric, position(mesh, VertexHandle(u)), position(mesh, VertexHandle(w)));
-            if (dR > radius) return;
-        }
-        S.candidates.push_back({u, w, dR, crease});
-    };
-    // Per cell, the positions of its half stencil are gathered into short contiguous arrays
-    // (own cell first), so each vertex runs one loop over its candidates: squared distances
-    // (vectorisable), then the sheet tests only for the few within reach.
-    S.gather.resize(5 * count);
-    double* const gx = S.gather.data();
-    double* const gy = gx + count;
-    double* const gz = gy + count;
-    double* const gd = gz + count;
-    std::uint32_t* const gs = reinterpret_cast<std::uint32_t*>(gd + count);
-    grid.forEachCell([&](std::uint32_t a0, std::uint32_t a1, const std::uint32_t (*range)[2], int ranges) {
-        std::uint32_t m = 0;
-        for (int r = 0; r < ranges; ++r) {
-            for (std::uint32_t t = range[r][0]; t < range[r][1]; ++t, ++m) {
-                gx[m] = qx[t];
-                gy[m] = qy[t];
-                gz[m] = qz[t];
-                gs[m] = t;
+    // The cells are swept in parallel chunks, each into its own candidate list (concatenated in
+    // chunk order, then sorted: the same list for any thread count).
+    const std::size_t cells = grid.cellCount();
+    const std::size_t chunks = (cells + kCellsPerChunk - 1) / kCellsPerChunk;
+    if (S.found.size() < chunks) S.found.resize(chunks);
+    detail::parallelFor(0, chunks, 1, [&](std::size_t chunk) {
+        std::vector<Candidate>& found = S.found[chunk];
+        found.clear();
+        // Per-thread buffers sized to the mesh (a cell's stencil may hold every vertex).
+        thread_local std::vector<std::uint32_t> nearBuffer;
+        thread_local std::vector<double> gatherBuffer;
+        if (nearBuffer.size() < count) nearBuffer.resize(count);
+        if (gatherBuffer.size() < 5 * count) gatherBuffer.resize(5 * count);
+        std::uint32_t* const near = nearBuffer.data();
+        auto consider = [&](std::uint32_t sa, std::uint32_t sb, double d2, bool crease) {
+            const int a = ids[sa], b = ids[sb];
+            if (hasCutIds) {
+                const int ca = mesh.property(cutId, VertexHandle(a));
+                if (ca != 0 && ca == mesh.property(cutId, VertexHandle(b))) return;
             }
-        }
-        for (std::uint32_t s = a0; s < a1; ++s) {
-            const std::uint32_t first = s - a0 + 1;
-            const double x = qx[s], y = qy[s], z = qz[s];
-            for (std::uint32_t j = first; j < m; ++j) {
-                const double dx = gx[j] - x, dy = gy[j] - y, dz = gz[j] - z;
-                gd[j] = dx * dx + dy * dy + dz * dz;
+            const int u = std::min(a, b), w = std::max(a, b);
+            double dR = std::sqrt(d2);
+            if (!euclidean) {
+                dR = metricLength(metric, position(mesh, VertexHandle(u)), position(mesh, VertexHandle(w)));
+                if (dR > radius) return;
             }
-            std::uint32_t k = 0;
-            for (std::uint32_t j = first; j < m; ++j) {
-                near[k] = gs[j];
-                k += gd[j] <= r2;
+            found.push_back({u, w, dR, crease});
+        };
+        // Per cell, the positions of its half stencil are gathered into short contiguous arrays
+        // (own cell first), so each vertex runs one loop over its candidates: squared distances
+        // (vectorisable), then the sheet tests only for the few within reach.
+        double* const gx = gatherBuffer.data();
+        double* const gy = gx + count;
+        double* const gz = gy + count;
+        double* const gd = gz + count;
+        std::uint32_t* const gs = reinterpret_cast<std::uint32_t*>(gd + count);
+        const std::size_t firstCell = chunk * kCellsPerChunk;
+        auto sweepCell = [&](std::uint32_t a0, std::uint32_t a1, const std::uint32_t(*range)[2], int ranges) {
+            std::uint32_t m = 0;
+            for (int r = 0; r < ranges; ++r) {
+                for (std::uint32_t t = range[r][0]; t < range[r][1]; ++t, ++m) {
+                    gx[m] = qx[t];
+                    gy[m] = qy[t];
+                    gz[m] = qz[t];
+                    gs[m] = t;
+                }
             }
-            if (k == 0) continue;
-            const double ux = mx[s], uy = my[s], uz = mz[s];
-            for (std::uint32_t j = 0; j < k; ++j) {
-                const std::uint32_t t = near[j];
-                const double dx = qx[t] - x, dy = qy[t] - y, dz = qz[t] - z;
-                const double d2 = dx * dx + dy * dy + dz * dz;
-                const double agree = ux * mx[t] + uy * my[t] + uz * mz[t];
-                const double hu = dx * ux + dy * uy + dz * uz;
-                const double hw = dx * mx[t] + dy * my[t] + dz * mz[t];
-                const double limit = kSquaredTangentSlope * d2;
-                const bool flat = (agree > kNormalAgreement) & (hu * hu <= limit) & (hw * hw <= limit);
-                // Convex crease: each vertex behind the other's tangent plane and the normals
-                // less than 120 degrees apart (a thin plate has opposite normals and stays in).
-                const bool crease = (agree > kCreaseAgreement) & (hu < 0) & (hw > 0);
-                if (!flat) consider(s, t, d2, crease);
+            for (std::uint32_t s = a0; s < a1; ++s) {
+                const std::uint32_t first = s - a0 + 1;
+                const double x = qx[s], y = qy[s], z = qz[s];
+                for (std::uint32_t j = first; j < m; ++j) {
+                    const double dx = gx[j] - x, dy = gy[j] - y, dz = gz[j] - z;
+                    gd[j] = dx * dx + dy * dy + dz * dz;
+                }
+                std::uint32_t k = 0;
+                for (std::uint32_t j = first; j < m; ++j) {
+                    near[k] = gs[j];
+                    k += gd[j] <= r2;
+                }
+                if (k == 0) continue;
+                const double ux = mx[s], uy = my[s], uz = mz[s];
+                for (std::uint32_t j = 0; j < k; ++j) {
+                    const std::uint32_t t = near[j];
+                    const double dx = qx[t] - x, dy = qy[t] - y, dz = qz[t] - z;
+                    const double d2 = dx * dx + dy * dy + dz * dz;
+                    const double agree = ux * mx[t] + uy * my[t] + uz * mz[t];
+                    const double hu = dx * ux + dy * uy + dz * uz;
+                    const double hw = dx * mx[t] + dy * my[t] + dz * mz[t];
+                    const double limit = kSquaredTangentSlope * d2;
+                    const bool flat = (agree > kNormalAgreement) & (hu * hu <= limit) & (hw * hw <= limit);
+                    // Convex crease: each vertex behind the other's tangent plane and the normals
+                    // less than 120 degrees apart (a thin plate has opposite normals and stays in).
+                    const bool crease = (agree > kCreaseAgreement) & (hu < 0) & (hw > 0);
+                    if (!flat) consider(s, t, d2, crease);
+                }
             }
-        }
+        };
+        grid.forEachCell(firstCell, firstCell + kCellsPerChunk, sweepCell);
     });
     std::vector<Candidate>& candidates = S.candidates;
+    candidates.clear();
+    for (std::size_t chunk = 0; chunk < chunks; ++chunk)
+        candidates.insert(candidates.end(), S.found[chunk].begin(), S.found[chunk].end());
     if (candidates.empty()) return result;
 
     // Exclude pairs close along the mesh: one bounded search per distinct source vertex.
@@ -246,7 +285,6 @@ std::vector<CollisionPair> findCollisions(const Mesh& mesh, const MetricField& m
     const double detourSlack = kDetourSlack * options.delta;
     OpenMesh::VPropHandleT<char> merged;
     const bool hasMerged = mesh.get_property_handle(merged, kMergedProperty);
-    detail::BoundedPathSearch& search = S.search;
     auto euclideanDistance = [&](int a, int b) {
         const double* p = xyz + 3 * a;
         const double* q = xyz + 3 * b;
@@ -270,33 +308,51 @@ std::vector<CollisionPair> findCollisions(const Mesh& mesh, const MetricField& m
     };
     // Longest edge path between a candidate's ends that is no detour around a gap (see kDetour).
     auto detourLimit = [&](const Candidate& c) { return kDetour * euclideanDistance(c.u, c.w) + detourSlack; };
-    int source = -1;
-    for (std::size_t k = 0; k < candidates.size(); ++k) {
-        const Candidate& c = candidates[k];
-        if (c.crease && closeByTwoEdges(c.u, c.w, detourLimit(c))) continue;
-        if (c.u != source) {
-            source = c.u;
-            double bound = 0;
-            for (std::size_t j = k; j < candidates.size() && candidates[j].u == source && bound < pathBound; ++j)
-                bound = std::max(bound, candidates[j].crease ? detourLimit(candidates[j]) : pathBound);
-            search.run(mesh, VertexHandle(source), std::min(bound, pathBound));
-        }
-        // Close along the mesh: a short edge path that is no detour around a gap.
-        const bool reached = search.reached(VertexHandle(c.w));
-        if (reached && search.distance(VertexHandle(c.w)) <= detourLimit(c)) continue;
-        if (c.crease) {
-            if (contacts) contacts->push_back({VertexHandle(c.u), VertexHandle(c.w), c.distance});
-            continue;
-        }
-        if (reached) {
-            const bool nearMerge =
-                hasMerged && (mesh.property(merged, VertexHandle(c.u)) || mesh.property(merged, VertexHandle(c.w)));
-            if (!nearMerge) {
-                if (contacts) contacts->push_back({VertexHandle(c.u), VertexHandle(c.w), c.distance});
+    // Each source vertex's candidates in parallel (one bounded search per source and thread), each
+    // candidate's verdict in its own slot; the pairs are then listed in candidate order.
+    std::vector<std::size_t>& sources = S.sources;
+    sources.clear();
+    for (std::size_t k = 0; k < candidates.size(); ++k)
+        if (k == 0 || candidates[k].u != candidates[k - 1].u) sources.push_back(k);
+    sources.push_back(candidates.size());
+    S.verdict.assign(candidates.size(), kNotColliding);
+    char* const verdict = S.verdict.data();
+    detail::parallelFor(0, sources.size() - 1, 8, [&](std::size_t g) {
+        thread_local detail::BoundedPathSearch search;
+        const std::size_t end = sources[g + 1];
+        bool searched = false;
+        for (std::size_t k = sources[g]; k < end; ++k) {
+            const Candidate& c = candidates[k];
+            if (c.crease && closeByTwoEdges(c.u, c.w, detourLimit(c))) continue;
+            if (!searched) {
+                searched = true;
+                double bound = 0;
+                for (std::size_t j = k; j < end && bound < pathBound; ++j)
+                    bound = std::max(bound, candidates[j].crease ? detourLimit(candidates[j]) : pathBound);
+                search.run(mesh, VertexHandle(c.u), std::min(bound, pathBound));
+            }
+            // Close along the mesh: a short edge path that is no detour around a gap.
+            const bool reached = search.reached(VertexHandle(c.w));
+            if (reached && search.distance(VertexHandle(c.w)) <= detourLimit(c)) continue;
+            if (c.crease) {
+                verdict[k] = kContact;
                 continue;
             }
+            if (reached) {
+                const bool nearMerge =
+                    hasMerged && (mesh.property(merged, VertexHandle(c.u)) || mesh.property(merged, VertexHandle(c.w)));
+                if (!nearMerge) {
+                    verdict[k] = kContact;
+                    continue;
+                }
+            }
+            verdict[k] = kColliding;
         }
-        result.push_back({VertexHandle(c.u), VertexHandle(c.w), c.distance});
+    });
+    for (std::size_t k = 0; k < candidates.size(); ++k) {
+        const Candidate& c = candidates[k];
+        if (verdict[k] == kColliding) result.push_back({VertexHandle(c.u), VertexHandle(c.w), c.distance});
+        else if (verdict[k] == kContact && contacts) contacts->push_back({VertexHandle(c.u), VertexHandle(c.w), c.distance});
     }
     std::sort(result.begin(), result.end(), [](const CollisionPair& x, const CollisionPair& y) {
         if (x.distance != y.distance) return x.distance < y.distance;

@@ -1,13 +1,20 @@
 #include "riemesh/forces.h"
 
+#include "detail/parallel.h"
+
 #include <algorithm>
 #include <cmath>
+#include <utility>
+#include <vector>
 
 namespace riemesh {
 
 namespace {
 
 double clampUnit(double s) { return std::max(-1.0, std::min(1.0, s)); }
+
+/// Elements per parallel chunk.
+constexpr std::size_t kGrain = 128;
 
 } // namespace
 
@@ -17,55 +24,94 @@ void computeForces(const Mesh& mesh, const ScalarImage& image, const ForceOption
     const std::size_t n = mesh.n_vertices();
     forces.assign(n, Vec3::Zero());
 
-    // Area-weighted vertex normals and umbrella vectors in one pass over faces / halfedges.
-    static thread_local std::vector<Vec3> normal, neighbourSum;
-    static thread_local std::vector<double> weightSum;
-    static thread_local std::vector<Mat3> tensor;
-    normal.assign(n, Vec3::Zero());
-    neighbourSum.assign(n, Vec3::Zero());
-    weightSum.assign(n, 0.0);
+    // Area-weighted vertex normals and umbrella vectors. Per face and per edge in parallel, then
+    // gathered per vertex in increasing face / edge index: the sums a pass over the faces and the
+    // edges in index order would make, bit for bit, whatever the thread count.
+    static thread_local std::vector<Vec3> normalBuffer, neighbourSumBuffer, faceNormalBuffer;
+    static thread_local std::vector<double> weightSumBuffer, edgeWeightBuffer;
+    static thread_local std::vector<Mat3> tensorBuffer;
+    // Plain pointers from here on: a thread_local named inside a parallel body would be the
+    // worker's own buffer, not this one.
+    normalBuffer.assign(n, Vec3::Zero());
+    neighbourSumBuffer.assign(n, Vec3::Zero());
+    weightSumBuffer.assign(n, 0.0);
+    Vec3* const normal = normalBuffer.data();
+    Vec3* const neighbourSum = neighbourSumBuffer.data();
+    double* const weightSum = weightSumBuffer.data();
     const bool riemannian = metric && !metric->isEuclidean();
+    const bool vertexStatus = mesh.has_vertex_status(), faceStatus = mesh.has_face_status(),
+               edgeStatus = mesh.has_edge_status();
+    auto deleted = [&](VertexHandle v) { return vertexStatus && mesh.status(v).deleted(); };
     if (riemannian) {
-        tensor.resize(n);
+        tensorBuffer.resize(n);
+        Mat3* const tensor = tensorBuffer.data();
         const VertexMetrics g(mesh, *metric); // the cache Evolution keeps, when there is one
-        for (auto v : mesh.vertices()) tensor[v.idx()] = g.at(v);
+        detail::parallelFor(0, n, kGrain, [&](std::size_t i) {
+            const VertexHandle v{int(i)};
+            if (!deleted(v)) tensor[i] = g.at(v);
+        });
     }
-    for (auto f : mesh.faces()) {
+    const Mat3* const tensor = tensorBuffer.data();
+    const std::size_t faceCount = mesh.n_faces(), edgeCount = mesh.n_edges();
+    faceNormalBuffer.resize(faceCount);
+    Vec3* const faceNormal = faceNormalBuffer.data();
+    detail::parallelFor(0, faceCount, kGrain, [&](std::size_t fi) {
+        const FaceHandle f{int(fi)};
+        if (faceStatus && mesh.status(f).deleted()) return;
         auto h0 = mesh.halfedge_handle(f);
         auto h1 = mesh.next_halfedge_handle(h0);
         const VertexHandle a = mesh.from_vertex_handle(h0), b = mesh.to_vertex_handle(h0),
                            c = mesh.to_vertex_handle(h1);
         const Vec3 pa = position(mesh, a), pb = position(mesh, b), pc = position(mesh, c);
-        const Vec3 fn = (pb - pa).cross(pc - pa);
-        normal[a.idx()] += fn;
-        normal[b.idx()] += fn;
-        normal[c.idx()] += fn;
-    }
-    for (auto e : mesh.edges()) {
-        // each edge contributes each end to the other's umbrella, weighted by its metric stretch
-        const auto h = mesh.halfedge_handle(e, 0);
-        const VertexHandle va = mesh.from_vertex_handle(h), vb = mesh.to_vertex_handle(h);
-        const int a = va.idx(), b = vb.idx();
-        const Vec3 pa = position(mesh, va), pb = position(mesh, vb);
-        double w = 1.0;
-        if (riemannian) {
-            const Vec3 d = pb - pa;
+        faceNormal[fi] = (pb - pa).cross(pc - pa);
+    });
+    // Each edge contributes each end to the other's umbrella, weighted by its metric stretch.
+    if (riemannian) edgeWeightBuffer.resize(edgeCount);
+    double* const edgeWeight = edgeWeightBuffer.data();
+    if (riemannian)
+        detail::parallelFor(0, edgeCount, kGrain, [&](std::size_t ei) {
+            const EdgeHandle e{int(ei)};
+            if (edgeStatus && mesh.status(e).deleted()) return;
+            const auto h = mesh.halfedge_handle(e, 0);
+            const VertexHandle va = mesh.from_vertex_handle(h), vb = mesh.to_vertex_handle(h);
+            const Vec3 d = position(mesh, vb) - position(mesh, va);
             const double euclid = d.norm();
-            if (euclid > 0) w = metricLength(tensor[a], tensor[b], d) / euclid;
+            edgeWeight[ei] = euclid > 0 ? metricLength(tensor[va.idx()], tensor[vb.idx()], d) / euclid : 1.0;
+        });
+    detail::parallelForChunks(0, n, kGrain, [&](std::size_t begin, std::size_t end) {
+        // One turn around each vertex: its faces, and its edges with the vertex across each.
+        std::vector<int> faces;
+        std::vector<std::pair<int, int>> edges;
+        for (std::size_t i = begin; i < end; ++i) {
+            const VertexHandle v{int(i)};
+            if (deleted(v)) continue;
+            faces.clear();
+            edges.clear();
+            for (auto h = mesh.cvoh_begin(v); h.is_valid(); ++h) {
+                const FaceHandle f = mesh.face_handle(*h);
+                if (f.is_valid()) faces.push_back(f.idx());
+                edges.emplace_back(mesh.edge_handle(*h).idx(), mesh.to_vertex_handle(*h).idx());
+            }
+            std::sort(faces.begin(), faces.end());
+            std::sort(edges.begin(), edges.end());
+            for (const int f : faces) normal[i] += faceNormal[f];
+            for (const auto& [ei, other] : edges) {
+                const double w = riemannian ? edgeWeight[ei] : 1.0;
+                neighbourSum[i] += w * position(mesh, VertexHandle(other));
+                weightSum[i] += w;
+            }
         }
-        neighbourSum[a] += w * pb;
-        neighbourSum[b] += w * pa;
-        weightSum[a] += w;
-        weightSum[b] += w;
-    }
+    });
 
     const double sign = options.objectBrighter ? 1.0 : -1.0;
     const double gradientStep = 0.5 * image.voxelSize();
-    for (auto v : mesh.vertices()) {
-        const int i = v.idx();
+    Vec3* const force = forces.data();
+    detail::parallelFor(0, n, kGrain, [&](std::size_t i) {
+        const VertexHandle v{int(i)};
+        if (deleted(v)) return;
         const Vec3 x = position(mesh, v);
         double len = normal[i].norm();
-        if (!(len > 0) || !(weightSum[i] > 0)) continue;
+        if (!(len > 0) || !(weightSum[i] > 0)) return;
         const Vec3 nrm = normal[i] / len;
 
         // External: inflation/deflation toward I = iso along the normal. The signed distance to the
@@ -105,8 +151,8 @@ void computeForces(const Mesh& mesh, const ScalarImage& image, const ForceOption
             const double scale = std::max(gp, gm);
             if (scale > 0) f += options.gradientWeight * limit * clampUnit((gp - gm) / scale) * nrm;
         }
-        forces[i] = f;
-    }
+        force[i] = f;
+    });
 }
 
 } // namespace riemesh

@@ -2,6 +2,7 @@
 
 #include "detail/nano_stencil.h"
 #include "detail/nano_validate.h"
+#include "detail/thread_accessor.h"
 
 #include <nanovdb/util/IO.h> // the file layout: nanovdb::io::Header and MetaData
 #include <nanovdb/util/SampleFromVoxels.h>
@@ -75,7 +76,7 @@ Box3 DenseImage::bounds() const
 }
 
 NanoImage::NanoImage(const nanovdb::FloatGrid* grid)
-    : mGrid(grid), mAccessor(grid ? grid->getAccessor() : throw std::invalid_argument("NanoImage: null grid"))
+    : mGrid(grid ? grid : throw std::invalid_argument("NanoImage: null grid")), mOwner(detail::newAccessorOwner())
 {
     mVoxelSize = grid->voxelSize()[0];
     const auto bbox = grid->worldBBox();
@@ -88,7 +89,7 @@ NanoImage::~NanoImage() = default;
 double NanoImage::value(const Vec3& x) const
 {
     detail::Stencil<float> st;
-    detail::fetchStencil(mAccessor, mGrid->worldToIndex(nanovdb::Vec3d(x.x(), x.y(), x.z())), st);
+    detail::fetchStencil(detail::threadAccessor<0>(mOwner, mGrid), mGrid->worldToIndex(nanovdb::Vec3d(x.x(), x.y(), x.z())), st);
     return detail::trilinear(st);
 }
 
@@ -105,7 +106,7 @@ void NanoImage::sample(const Vec3& x, double& value, Vec3& gradient) const
     // Value and gradient of the trilinear interpolant from one 2x2x2 fetch; the gradient is mapped
     // from index to world space by the grid's transform.
     detail::Stencil<float> st;
-    detail::fetchStencil(mAccessor, mGrid->worldToIndex(nanovdb::Vec3d(x.x(), x.y(), x.z())), st);
+    detail::fetchStencil(detail::threadAccessor<0>(mOwner, mGrid), mGrid->worldToIndex(nanovdb::Vec3d(x.x(), x.y(), x.z())), st);
     value = detail::trilinear(st);
     const nanovdb::Vec3d w = mGrid->indexToWorldGrad(detail::trilinearGradient(st));
     gradient = Vec3(w[0], w[1], w[2]);

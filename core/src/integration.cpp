@@ -1,9 +1,17 @@
 #include "riemesh/integration.h"
 
+#include "detail/parallel.h"
+
 #include <algorithm>
 #include <cmath>
+#include <vector>
 
 namespace riemesh {
+
+namespace {
+/// Vertices per parallel chunk.
+constexpr std::size_t kGrain = 128;
+} // namespace
 
 IntegrationStats integrate(Mesh& mesh, const std::vector<Vec3>& forces, const IntegrationOptions& options)
 {
@@ -16,9 +24,15 @@ IntegrationStats integrate(Mesh& mesh, const std::vector<Vec3>& forces, const In
     const double keep = options.driftDecay;
     const double dt = options.timeStep;
     const double invMass = 1.0 / options.mass;
-    double energy = 0;
-    std::size_t count = 0;
-    for (auto v : mesh.vertices()) {
+    // Every vertex in parallel (each writes only its own properties); its kinetic energy goes to a
+    // per-vertex array summed in index order afterwards, so the mean is the same for any thread count.
+    const std::size_t n = mesh.n_vertices();
+    std::vector<double> vertexEnergy(n, 0.0), maxStep(n, 0.0);
+    std::vector<char> counted(n, 0), moving(n, 0);
+    const bool vertexStatus = mesh.has_vertex_status();
+    detail::parallelFor(0, n, kGrain, [&](std::size_t i) {
+        const VertexHandle v{int(i)};
+        if (vertexStatus && mesh.status(v).deleted()) return;
         const auto& vel = mesh.property(velocity, v);
         Vec3 u(vel[0], vel[1], vel[2]);
         const Vec3& f = forces[v.idx()];
@@ -50,14 +64,22 @@ IntegrationStats integrate(Mesh& mesh, const std::vector<Vec3>& forces, const In
         }
         mesh.point(v) += toPoint(d);
         mesh.property(velocity, v) = toPoint(u);
-        energy += 0.5 * options.mass * u.squaredNorm();
-        const double step = d.norm();
-        stats.maxDisplacement = std::max(stats.maxDisplacement, step);
+        vertexEnergy[i] = 0.5 * options.mass * u.squaredNorm();
+        maxStep[i] = d.norm();
         Drift& m = mesh.property(drift, v);
         m.x = keep * m.x + (1 - keep) * d.x();
         m.y = keep * m.y + (1 - keep) * d.y();
         m.z = keep * m.z + (1 - keep) * d.z();
-        if (m.x * m.x + m.y * m.y + m.z * m.z > options.movingSpeed * options.movingSpeed) ++stats.moving;
+        moving[i] = m.x * m.x + m.y * m.y + m.z * m.z > options.movingSpeed * options.movingSpeed;
+        counted[i] = 1;
+    });
+    double energy = 0;
+    std::size_t count = 0;
+    for (std::size_t i = 0; i < n; ++i) {
+        if (!counted[i]) continue;
+        energy += vertexEnergy[i];
+        stats.maxDisplacement = std::max(stats.maxDisplacement, maxStep[i]);
+        stats.moving += std::size_t(moving[i]);
         ++count;
     }
     stats.meanKineticEnergy = count ? energy / double(count) : 0.0;

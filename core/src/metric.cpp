@@ -1,11 +1,14 @@
 #include "riemesh/metric.h"
 
 #include "detail/nano_stencil.h"
+#include "detail/parallel.h"
+#include "detail/thread_accessor.h"
 
 #include <nanovdb/util/SampleFromVoxels.h>
 
 #include <Eigen/Eigenvalues>
 
+#include <atomic>
 #include <cmath>
 #include <stdexcept>
 
@@ -55,12 +58,23 @@ Mat3 VertexMetrics::at(VertexHandle v) const
 std::size_t VertexMetrics::update()
 {
     if (!mWritable || !mHasCache) return 0;
-    std::size_t sampled = 0;
-    for (auto v : mMesh.vertices()) {
-        if (mMesh.property(mCache, v).at == mMesh.point(v)) continue;
-        at(v);
-        ++sampled;
-    }
+    // Every vertex in parallel: each writes only its own cache entry.
+    const bool vertexStatus = mMesh.has_vertex_status();
+    std::atomic<std::size_t> sampled{0};
+    detail::parallelForChunks(0, mMesh.n_vertices(), 128, [&](std::size_t begin, std::size_t end) {
+        std::size_t count = 0;
+        for (std::size_t i = begin; i < end; ++i) {
+            const VertexHandle v{int(i)};
+            if (vertexStatus && mMesh.status(v).deleted()) continue;
+            const Mesh::Point& p = mMesh.point(v);
+            VertexMetric& entry = mWritable->property(mCache, v);
+            if (entry.at == p) continue;
+            entry.g = mMetric.at(toVec3(p));
+            entry.at = p;
+            ++count;
+        }
+        sampled += count;
+    });
     return sampled;
 }
 
@@ -88,14 +102,14 @@ Mat3 metricFromEigen(const Mat3& basis, const Vec3& eigenvalues)
 struct NanoMetric::Impl {
     const nanovdb::Vec3fGrid* diag;
     const nanovdb::Vec3fGrid* off;
-    nanovdb::DefaultReadAccessor<nanovdb::Vec3f> diagAccessor, offAccessor;
+    std::uint64_t owner; ///< tells this metric's per-thread accessors apart
 };
 
 NanoMetric::NanoMetric(const nanovdb::Vec3fGrid* diag, const nanovdb::Vec3fGrid* off, double maxEigenvalue)
     : mMax(maxEigenvalue)
 {
     if (!diag || !off) throw std::invalid_argument("NanoMetric: metric_diag and metric_off grids are required");
-    mImpl.reset(new Impl{diag, off, diag->getAccessor(), off->getAccessor()});
+    mImpl.reset(new Impl{diag, off, detail::newAccessorOwner()});
 }
 
 NanoMetric::~NanoMetric() = default;
@@ -105,8 +119,8 @@ Mat3 NanoMetric::at(const Vec3& x) const
     // Both grids share one transform and one topology (written together by riemesh::vdb).
     const nanovdb::Vec3d ijk = mImpl->diag->worldToIndex(nanovdb::Vec3d(x.x(), x.y(), x.z()));
     detail::Stencil<nanovdb::Vec3f> sd, so;
-    detail::fetchStencil(mImpl->diagAccessor, ijk, sd);
-    detail::fetchStencil(mImpl->offAccessor, ijk, so);
+    detail::fetchStencil(detail::threadAccessor<0>(mImpl->owner, mImpl->diag), ijk, sd);
+    detail::fetchStencil(detail::threadAccessor<1>(mImpl->owner, mImpl->off), ijk, so);
     const nanovdb::Vec3f d = detail::trilinear(sd);
     const nanovdb::Vec3f o = detail::trilinear(so);
     Mat3 g;

@@ -8,6 +8,8 @@
 // looks at every edge: the later ones re-examine the edges of the faces around the vertices the
 // previous pass changed (an edge away from every change keeps its length, its valences and its
 // faces, so its verdict), which keeps a call O(n + changes) however many passes it takes.
+// The first pass's measurements and flip tests run in parallel (detail/parallel.h); every edit
+// stays sequential, in the order a serial pass would make it.
 //
 // A short edge u-v whose endpoints share an outside neighbour w is not collapsed (it would pinch
 // the loop u-v-w). If one side of that loop holds only a few vertices (a dent or pimple of the
@@ -21,11 +23,14 @@
 #include "riemesh/edge_ops.h"
 
 #include "detail/edge_guards.h"
+#include "detail/parallel.h"
 
 #include <algorithm>
 #include <array>
+#include <atomic>
 #include <cmath>
 #include <cstdint>
+#include <functional>
 #include <stdexcept>
 #include <tuple>
 
@@ -52,6 +57,9 @@ constexpr double kDelaunayTolerance = 1e-2;
 constexpr double kFlipFlatCosine = 0.9;
 
 int squared(int x) { return x * x; }
+
+/// Elements per parallel chunk.
+constexpr std::size_t kGrain = 128;
 
 /// A loop u-v-w that cuts off at most this many vertices is a cap (a dent or a pimple of the
 /// sampling), dissolved by collapses; a loop with more on both sides is a tunnel.
@@ -103,17 +111,26 @@ public:
     {
         mLong.clear();
         mShort.clear();
-        mValence.assign(mMesh.n_vertices(), 0);
         const int edgeCount = int(mMesh.n_edges());
+        const int vertexCount = int(mMesh.n_vertices());
+        mValence.assign(std::size_t(vertexCount), 0);
         mClass.assign(std::size_t(edgeCount), kFits);
-        for (int i = 0; i < edgeCount; ++i) {
-            const EdgeHandle e(i);
-            if (mMesh.status(e).deleted()) continue;
-            const HalfedgeHandle h = mMesh.halfedge_handle(e, 0);
-            ++mValence[mMesh.from_vertex_handle(h).idx()];
-            ++mValence[mMesh.to_vertex_handle(h).idx()];
-            classify(i);
-        }
+        // In parallel: G at every vertex first (so that measuring only reads the cache), then each
+        // vertex's valence and each edge's class; the long and short edges are then queued in edge
+        // order, as one pass over the edges would.
+        mVertexMetrics.update();
+        const bool vertexStatus = mMesh.has_vertex_status();
+        int* const valence = mValence.data();
+        detail::parallelFor(0, std::size_t(vertexCount), kGrain, [&](std::size_t i) {
+            const VertexHandle v{int(i)};
+            if (!(vertexStatus && mMesh.status(v).deleted())) valence[i] = int(mMesh.valence(v));
+        });
+        signed char* const edgeClass = mClass.data();
+        detail::parallelFor(0, std::size_t(edgeCount), kGrain, [&](std::size_t i) {
+            if (!mMesh.status(EdgeHandle(int(i))).deleted()) edgeClass[i] = measureClass(int(i));
+        });
+        for (int i = 0; i < edgeCount; ++i)
+            if (edgeClass[i] != kFits) queue(i, edgeClass[i]);
         mEdges.clear();
         clearTouched();
     }
@@ -150,32 +167,55 @@ public:
     std::pair<int, int> countOutside()
     {
         measureTouched();
-        int tooLong = 0, tooShort = 0;
-        for (std::size_t i = 0; i < mClass.size(); ++i) {
-            if (mClass[i] == kFits || mMesh.status(EdgeHandle(int(i))).deleted()) continue;
-            (mClass[i] == kLong ? tooLong : tooShort) += 1;
-        }
-        return {tooLong, tooShort};
+        std::atomic<int> tooLong{0}, tooShort{0};
+        detail::parallelForChunks(0, mClass.size(), 4 * kGrain, [&](std::size_t begin, std::size_t end) {
+            int longs = 0, shorts = 0;
+            for (std::size_t i = begin; i < end; ++i) {
+                if (mClass[i] == kFits || mMesh.status(EdgeHandle(int(i))).deleted()) continue;
+                (mClass[i] == kLong ? longs : shorts) += 1;
+            }
+            tooLong += longs;
+            tooShort += shorts;
+        });
+        return {tooLong.load(), tooShort.load()};
     }
 
-    /// Records edge i's class and queues it when it is too long or too short.
-    void classify(int i)
+    /// The class of edge i by its metric length (reads only: safe in parallel once every vertex's
+    /// G is cached). With a Euclidean metric the squared length is compared with the squared
+    /// bounds (the same classification as metricLength, without a call and a square root per edge).
+    signed char measureClass(int i) const
     {
         const EdgeHandle e(i);
-        signed char& c = mClass[std::size_t(i)];
-        c = kFits;
         if (mMetric.isEuclidean()) {
             const HalfedgeHandle h = mMesh.halfedge_handle(e, 0);
             const Mesh::Point* points = mMesh.points();
             const double l2 = (points[mMesh.to_vertex_handle(h).idx()] - points[mMesh.from_vertex_handle(h).idx()]).sqrnorm();
-            if (l2 > mHi * mHi) mLong.push_back({length(e), std::sqrt(l2), i}), c = kLong;
-            else if (l2 < mLo * mLo) mShort.push_back({length(e), std::sqrt(l2), i}), c = kShort;
+            return l2 > mHi * mHi ? kLong : l2 < mLo * mLo ? kShort : kFits;
+        }
+        const double l = length(e);
+        return l > mHi ? kLong : l < mLo ? kShort : kFits;
+    }
+
+    /// Records edge i's class `c` (from measureClass) and queues it when it is too long or too short.
+    void queue(int i, signed char c)
+    {
+        const EdgeHandle e(i);
+        mClass[std::size_t(i)] = c;
+        if (c == kFits) return;
+        if (mMetric.isEuclidean()) {
+            const HalfedgeHandle h = mMesh.halfedge_handle(e, 0);
+            const Mesh::Point* points = mMesh.points();
+            const double l2 = (points[mMesh.to_vertex_handle(h).idx()] - points[mMesh.from_vertex_handle(h).idx()]).sqrnorm();
+            (c == kLong ? mLong : mShort).push_back({length(e), std::sqrt(l2), i});
         } else {
             const double l = length(e);
-            if (l > mHi) mLong.push_back({l, euclideanLength(e), i}), c = kLong;
-            else if (l < mLo) mShort.push_back({l, l, i}), c = kShort;
+            if (c == kLong) mLong.push_back({l, euclideanLength(e), i});
+            else mShort.push_back({l, l, i});
         }
     }
+
+    /// Records edge i's class and queues it when it is too long or too short.
+    void classify(int i) { queue(i, measureClass(i)); }
 
     /// Marks v as changed by this pass: the next pass re-examines the edges of its faces.
     void touch(VertexHandle v)
@@ -262,47 +302,104 @@ public:
     }
 
     /// One sweep of flips over every edge (all = true) or over the edges of the last measureTouched().
+    ///
+    /// The sweep over every edge is the one serial pass over the whole mesh a call would otherwise
+    /// make: the edges a flip would be wanted at are found in parallel first (on the mesh as it is
+    /// before the sweep), then the sweep visits, in edge order, only those and the edges around
+    /// every flip it makes (whose verdicts that flip may have changed). An edge it skips keeps the
+    /// verdict it had before the sweep (no flip): the same flips as visiting every edge in order.
     int flipEdges(bool all)
     {
         int flips = 0;
-        const int edgeCount = all ? int(mMesh.n_edges()) : int(mEdges.size());
-        for (int k = 0; k < edgeCount; ++k) {
-            const int i = all ? k : mEdges[std::size_t(k)];
-            const EdgeHandle e(i);
-            if (mMesh.status(e).deleted()) continue;
-            const HalfedgeHandle h = mMesh.halfedge_handle(e, 0), o = mMesh.halfedge_handle(e, 1);
-            if (!mMesh.face_handle(h).is_valid() || !mMesh.face_handle(o).is_valid()) continue;
-            const VertexHandle u = mMesh.from_vertex_handle(h), v = mMesh.to_vertex_handle(h);
-            const VertexHandle a = mMesh.to_vertex_handle(mMesh.next_halfedge_handle(h));
-            const VertexHandle b = mMesh.to_vertex_handle(mMesh.next_halfedge_handle(o));
-            int& vu = mValence[u.idx()];
-            int& vv = mValence[v.idx()];
-            int& va = mValence[a.idx()];
-            int& vb = mValence[b.idx()];
-            if (vu <= 3 || vv <= 3 || a == b) continue;
-            // Deviation of the four valences from the regular 6, before and after the flip.
-            const int before = squared(vu - 6) + squared(vv - 6) + squared(va - 6) + squared(vb - 6);
-            const int after = squared(vu - 7) + squared(vv - 7) + squared(va - 5) + squared(vb - 5);
-            if (after > before) continue;
-            const Vec3 pu = position(mMesh, u), pv = position(mMesh, v);
-            const Vec3 pa = position(mMesh, a), pb = position(mMesh, b);
-            if (after == before && !violatesDelaunay(u, v, pu, pv, pa, pb)) continue;
-            const double newLength = lengthBetween(a, b);
-            if (newLength < mLo || newLength > mHi) continue;
-            // Do not fold the surface: the new dihedral may not be sharper than the old one (or ~26 deg).
-            const Vec3 n1 = (pv - pu).cross(pa - pu), n2 = (pu - pv).cross(pb - pv);
-            const double n1n2 = n1.norm() * n2.norm();
-            const double oldCosine = n1n2 > 0 ? n1.dot(n2) / n1n2 : -1.0;
-            if (!detail::isFlipAcceptable(mMesh, e, std::min(oldCosine, kFlipFlatCosine) - 1e-9)) continue;
-            detail::flipUnchecked(mMesh, e);
-            --vu;
-            --vv;
-            ++va;
-            ++vb;
+        if (!all) {
+            for (const int i : mEdges) flips += flipIfWanted(i);
+            return flips;
+        }
+        const int edgeCount = int(mMesh.n_edges());
+        mVertexMetrics.update(); // measuring then only reads the cache
+        mWanted.assign(std::size_t(edgeCount), 0);
+        char* const wanted = mWanted.data();
+        detail::parallelFor(0, std::size_t(edgeCount), kGrain, [&](std::size_t i) {
+            wanted[i] = isFlipWanted(EdgeHandle(int(i)));
+        });
+        mFlipQueue.clear(); // edges around the flips made, ahead of the sweep (a min-heap)
+        const auto later = std::greater<int>();
+        int cursor = -1;
+        int next = 0; // the next edge wanted before the sweep
+        for (;;) {
+            while (next < edgeCount && (next <= cursor || !wanted[next])) ++next;
+            while (!mFlipQueue.empty() && mFlipQueue.front() <= cursor) {
+                std::pop_heap(mFlipQueue.begin(), mFlipQueue.end(), later);
+                mFlipQueue.pop_back();
+            }
+            int i = next < edgeCount ? next : edgeCount;
+            if (!mFlipQueue.empty()) i = std::min(i, mFlipQueue.front());
+            if (i >= edgeCount) break;
+            cursor = i;
+            std::array<VertexHandle, 4> quad;
+            if (!flipIfWanted(i, &quad)) continue;
             ++flips;
-            touch(u), touch(v), touch(a), touch(b);
+            // The flip changed the valences of its four vertices and the faces around them: every
+            // edge of those faces still ahead is visited.
+            for (const VertexHandle x : quad)
+                for (auto f = mMesh.cvf_begin(x); f.is_valid(); ++f)
+                    for (auto fh = mMesh.cfh_begin(*f); fh.is_valid(); ++fh) {
+                        const int j = mMesh.edge_handle(*fh).idx();
+                        if (j <= cursor) continue;
+                        mFlipQueue.push_back(j);
+                        std::push_heap(mFlipQueue.begin(), mFlipQueue.end(), later);
+                    }
         }
         return flips;
+    }
+
+    /// True when edge e should be flipped now: lower valence deviation from 6 (or equal and
+    /// Delaunay-like in the metric), an edge a-b within [delta, zeta*delta], and no fold. Reads
+    /// only (safe in parallel once every vertex's G is cached).
+    bool isFlipWanted(EdgeHandle e) const
+    {
+        if (mMesh.status(e).deleted()) return false;
+        const HalfedgeHandle h = mMesh.halfedge_handle(e, 0), o = mMesh.halfedge_handle(e, 1);
+        if (!mMesh.face_handle(h).is_valid() || !mMesh.face_handle(o).is_valid()) return false;
+        const VertexHandle u = mMesh.from_vertex_handle(h), v = mMesh.to_vertex_handle(h);
+        const VertexHandle a = mMesh.to_vertex_handle(mMesh.next_halfedge_handle(h));
+        const VertexHandle b = mMesh.to_vertex_handle(mMesh.next_halfedge_handle(o));
+        const int vu = mValence[u.idx()], vv = mValence[v.idx()], va = mValence[a.idx()], vb = mValence[b.idx()];
+        if (vu <= 3 || vv <= 3 || a == b) return false;
+        // Deviation of the four valences from the regular 6, before and after the flip.
+        const int before = squared(vu - 6) + squared(vv - 6) + squared(va - 6) + squared(vb - 6);
+        const int after = squared(vu - 7) + squared(vv - 7) + squared(va - 5) + squared(vb - 5);
+        if (after > before) return false;
+        const Vec3 pu = position(mMesh, u), pv = position(mMesh, v);
+        const Vec3 pa = position(mMesh, a), pb = position(mMesh, b);
+        if (after == before && !violatesDelaunay(u, v, pu, pv, pa, pb)) return false;
+        const double newLength = lengthBetween(a, b);
+        if (newLength < mLo || newLength > mHi) return false;
+        // Do not fold the surface: the new dihedral may not be sharper than the old one (or ~26 deg).
+        const Vec3 n1 = (pv - pu).cross(pa - pu), n2 = (pu - pv).cross(pb - pv);
+        const double n1n2 = n1.norm() * n2.norm();
+        const double oldCosine = n1n2 > 0 ? n1.dot(n2) / n1n2 : -1.0;
+        return detail::isFlipAcceptable(mMesh, e, std::min(oldCosine, kFlipFlatCosine) - 1e-9);
+    }
+
+    /// Flips edge i if isFlipWanted (keeping the valences and the changed vertices up to date);
+    /// `quad` receives the four vertices of the flip.
+    bool flipIfWanted(int i, std::array<VertexHandle, 4>* quad = nullptr)
+    {
+        const EdgeHandle e(i);
+        if (!isFlipWanted(e)) return false;
+        const HalfedgeHandle h = mMesh.halfedge_handle(e, 0), o = mMesh.halfedge_handle(e, 1);
+        const VertexHandle u = mMesh.from_vertex_handle(h), v = mMesh.to_vertex_handle(h);
+        const VertexHandle a = mMesh.to_vertex_handle(mMesh.next_halfedge_handle(h));
+        const VertexHandle b = mMesh.to_vertex_handle(mMesh.next_halfedge_handle(o));
+        detail::flipUnchecked(mMesh, e);
+        --mValence[u.idx()];
+        --mValence[v.idx()];
+        ++mValence[a.idx()];
+        ++mValence[b.idx()];
+        touch(u), touch(v), touch(a), touch(b);
+        if (quad) *quad = {u, v, a, b};
+        return true;
     }
 
     /// Drops the tunnel candidates that later edits of this call undid: a vertex was removed, the
@@ -511,6 +608,8 @@ private:
     std::vector<int> mTouchedList;    ///< the vertices marked in mTouched
     std::vector<int> mEdges;          ///< the edges re-measured by measureTouched()
     std::vector<char> mEdgeSeen;      ///< by edge idx(): scratch of measureTouched()
+    std::vector<char> mWanted;        ///< by edge idx(): isFlipWanted before a full flip sweep
+    std::vector<int> mFlipQueue;      ///< edges around the flips of a sweep, ahead of it (min-heap)
     int mCollapses = 0;             ///< collapses of the current collapse stage
     std::vector<VertexHandle> mCap; ///< the vertices of a small cap being dissolved
 };

@@ -22,6 +22,7 @@ namespace riemesh {
 
 using Box3 = Eigen::AlignedBox3d;
 
+/// Implementations must be safe to call from several threads at once (the core samples in parallel).
 class ScalarImage {
 public:
     virtual ~ScalarImage() = default;
@@ -79,7 +80,7 @@ private:
 };
 
 /// A NanoVDB float grid, trilinear in index space, mapped to world space by the grid's transform.
-/// The grid is not owned. Not thread-safe (it keeps a cached accessor): one object per thread.
+/// The grid is not owned. Thread-safe: each thread samples through its own cached accessor.
 class NanoImage final : public ScalarImage {
 public:
     explicit NanoImage(const nanovdb::FloatGrid* grid);
@@ -92,7 +93,7 @@ public:
     const nanovdb::FloatGrid* grid() const { return mGrid; }
 private:
     const nanovdb::FloatGrid* mGrid;
-    mutable nanovdb::DefaultReadAccessor<float> mAccessor;
+    std::uint64_t mOwner; ///< tells this image's per-thread accessors apart (detail/thread_accessor.h)
     double mVoxelSize;
     Box3 mBounds;
 };

@@ -17,6 +17,7 @@
 
 namespace riemesh {
 
+/// Implementations must be safe to call from several threads at once (the core samples in parallel).
 class MetricField {
 public:
     virtual ~MetricField() = default;
@@ -119,8 +120,8 @@ private:
 
 /// G read from two NanoVDB Vec3f grids, trilinearly interpolated: `diag` = (gxx, gyy, gzz) with
 /// background (1,1,1) and `off` = (gxy, gxz, gyz) with background (0,0,0) (identity where inactive).
-/// The grids are not owned: keep their GridHandles alive as long as this object. Not thread-safe
-/// (it keeps cached accessors): one object per thread.
+/// The grids are not owned: keep their GridHandles alive as long as this object. Thread-safe: each
+/// thread samples through its own cached accessors.
 class NanoMetric final : public MetricField {
 public:
     NanoMetric(const nanovdb::Vec3fGrid* diag, const nanovdb::Vec3fGrid* off, double maxEigenvalue);

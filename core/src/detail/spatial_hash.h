@@ -11,6 +11,7 @@
 // falling back to a comparison sort when the occupied box is sparse (many more cells than points).
 #pragma once
 
+#include <algorithm>
 #include <cstddef>
 #include <cstdint>
 #include <vector>
@@ -38,13 +39,31 @@ public:
     template <class F>
     void forEachCell(F&& f) const
     {
-        const std::size_t cells = mCellStart.size() - 1;
-        if (cells == 0) return;
+        forEachCell(0, cellCount(), f);
+    }
+
+    /// The number of occupied cells.
+    std::size_t cellCount() const { return mCellStart.empty() ? 0 : mCellStart.size() - 1; }
+
+    /// forEachCell() for the occupied cells [cellBegin, cellEnd) only (in increasing order): disjoint
+    /// ranges of cells can be swept by different threads.
+    template <class F>
+    void forEachCell(std::size_t cellBegin, std::size_t cellEnd, F&& f) const
+    {
+        const std::size_t cells = cellCount();
+        if (cellEnd > cells) cellEnd = cells;
+        if (cellBegin >= cellEnd) return;
         const std::uint64_t* key = mCellKey.data(); // key[cells] is a sentinel above every key
         const std::uint32_t* start = mCellStart.data();
-        std::size_t lo[4] = {0, 0, 0, 0}, hi[4] = {0, 0, 0, 0};
+        // The forward rows' pointers start at the first cell of each row at or after the first
+        // cell's stencil (found by bisection); from there they only move forward.
+        std::size_t lo[4], hi[4];
+        for (int r = 0; r < 4; ++r) {
+            const std::uint64_t target = key[cellBegin] + mRowStep[r] - 1;
+            lo[r] = hi[r] = std::size_t(std::lower_bound(key, key + cells, target) - key);
+        }
         std::uint32_t range[5][2];
-        for (std::size_t c = 0; c < cells; ++c) {
+        for (std::size_t c = cellBegin; c < cellEnd; ++c) {
             const std::uint64_t k = key[c];
             const std::uint32_t a0 = start[c], a1 = start[c + 1];
             range[0][0] = a0;

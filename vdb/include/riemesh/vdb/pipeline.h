@@ -92,7 +92,7 @@ struct PipelineOptions {
     /// many as leave the coarsest level about kCoarsestEdges edges across the image (autoLevels);
     /// 0: the finest level only. [-1, 12].
     int levels = -1;
-    int threads = 0;                ///< worker threads for the volume stages (0: all cores)
+    int threads = 0;                ///< worker threads for the volume stages and the evolution (0: all cores)
     InitialSurface init;            ///< --init
     /// Called when a stage starts (`iteration` null) and after every iteration of the evolution (stage
     /// Evolve, that iteration's statistics); return false to interrupt: meshVolume then returns at
