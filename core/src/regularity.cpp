@@ -21,11 +21,13 @@
 #include "riemesh/edge_ops.h"
 
 #include "detail/edge_guards.h"
+#include "detail/intersection_guard.h"
 
 #include <algorithm>
 #include <array>
 #include <cmath>
 #include <cstdint>
+#include <memory>
 #include <stdexcept>
 #include <tuple>
 
@@ -62,6 +64,7 @@ public:
         : mMesh(mesh), mMetric(metric), mVertexMetrics(mesh, metric), mStats(stats), mLo(options.delta),
           mHi(options.zeta * options.delta)
     {
+        if (options.intersectionFree) mGuard = std::make_unique<detail::IntersectionGuard>(mesh);
     }
 
     /// Euclidean length of edge e (world units).
@@ -196,6 +199,7 @@ public:
     {
         if (mValence.size() < mMesh.n_vertices()) mValence.resize(mMesh.n_vertices(), 0);
         mValence[std::size_t(v.idx())] = int(mMesh.valence(v));
+        if (mGuard) mGuard->update(v);
         touch(v);
         for (auto n = mMesh.cvv_begin(v); n.is_valid(); ++n) {
             mValence[std::size_t(n->idx())] = int(mMesh.valence(*n));
@@ -291,7 +295,9 @@ public:
             const double n1n2 = n1.norm() * n2.norm();
             const double oldCosine = n1n2 > 0 ? n1.dot(n2) / n1n2 : -1.0;
             if (!detail::isFlipAcceptable(mMesh, e, std::min(oldCosine, kFlipFlatCosine) - 1e-9)) continue;
+            if (mGuard && !mGuard->isFlipSafe(e)) continue;
             detail::flipUnchecked(mMesh, e);
+            if (mGuard) mGuard->update(a);
             --vu;
             --vv;
             ++va;
@@ -360,6 +366,7 @@ private:
             if (obstacles & ~detail::kCollapseGeometry) return;
             if (obstacles) continue;
             if (!keepsEdgesShortEnough(u, v, target)) continue;
+            if (mGuard && !mGuard->isCollapseSafe(hh, target)) continue;
             collapseAndRequeue(hh, target);
             return;
         }
@@ -400,6 +407,7 @@ private:
                     const Vec3 target = position(mMesh, mMesh.to_vertex_handle(*oh)); // the neighbour stays
                     if (detail::collapseObstacles(mMesh, *oh, target) != 0) continue;
                     if (!keepsEdgesShortEnough(x, mMesh.to_vertex_handle(*oh), target)) continue;
+                    if (mGuard && !mGuard->isCollapseSafe(*oh, target)) continue;
                     collapseAndRequeue(*oh, target);
                     mCap.erase(mCap.begin() + std::ptrdiff_t(i));
                     progress = true;
@@ -507,6 +515,7 @@ private:
     std::vector<char> mEdgeSeen;      ///< by edge idx(): scratch of measureTouched()
     int mCollapses = 0;             ///< collapses of the current collapse stage
     std::vector<VertexHandle> mCap; ///< the vertices of a small cap being dissolved
+    std::unique_ptr<detail::IntersectionGuard> mGuard; ///< options.intersectionFree
 };
 
 } // namespace
