@@ -44,7 +44,9 @@ CcdResult additiveCcd(std::array<Vec3, 4> x, std::array<Vec3, 4> d, int split, d
     if (!(lp > 0)) return result; // no relative motion (or not finite: nothing sensible to do)
     double dist = distance(x);
     if (!(dist > 0)) return {true, 0.0};
-    const double xi = std::min(eta, 0.5 * dist);
+    // Closer than eta already (rounding, or an edit of the mesh left them so): they may close in
+    // by 0.1% at most (pressed together for 3000 iterations, they keep 5% of their distance).
+    const double xi = dist > eta ? eta : 0.999 * dist;
     const double gap = s * (dist - xi);
     double t = 0;
     double tl = (1 - s) * (dist - xi) / lp;
@@ -379,6 +381,56 @@ bool facesMeetMesh(const Mesh& mesh, const std::vector<FaceHandle>& faces)
             if (meet(x, y)) return true;
     }
     return false;
+}
+
+double minimumSeparation(const Mesh& mesh, double radius)
+{
+    std::vector<Vec3> start(mesh.n_vertices());
+    for (auto v : mesh.vertices()) start[std::size_t(v.idx())] = position(mesh, v);
+    double best = radius;
+    detail::BoxGrid grid;
+    std::vector<std::array<int, 3>> faces;
+    std::vector<std::array<int, 2>> edges;
+    for (auto f : mesh.faces()) {
+        const HalfedgeHandle h = mesh.halfedge_handle(f);
+        faces.push_back({mesh.from_vertex_handle(h).idx(), mesh.to_vertex_handle(h).idx(),
+                         mesh.to_vertex_handle(mesh.next_halfedge_handle(h)).idx()});
+    }
+    for (auto e : mesh.edges()) {
+        const HalfedgeHandle h = mesh.halfedge_handle(e, 0);
+        edges.push_back({mesh.from_vertex_handle(h).idx(), mesh.to_vertex_handle(h).idx()});
+    }
+    auto boxOf = [&](const int* v, int k) {
+        Box6 b = {1e300, 1e300, 1e300, -1e300, -1e300, -1e300};
+        for (int i = 0; i < k; ++i)
+            for (int c = 0; c < 3; ++c) {
+                b[c] = std::min(b[c], start[std::size_t(v[i])][c] - radius);
+                b[c + 3] = std::max(b[c + 3], start[std::size_t(v[i])][c] + radius);
+            }
+        return b;
+    };
+    grid.reset(4 * radius + 1e-9, 4 * faces.size() + 64);
+    for (std::size_t f = 0; f < faces.size(); ++f) grid.insert(int(f), boxOf(faces[f].data(), 3));
+    for (auto v : mesh.vertices()) {
+        const int i = v.idx();
+        Box6 b = boxOf(&i, 1);
+        grid.query(b, [&](int f) {
+            const auto& t = faces[std::size_t(f)];
+            if (t[0] == i || t[1] == i || t[2] == i) return;
+            best = std::min(best, std::sqrt(pointTriangleDistanceSquared(start[i], start[t[0]], start[t[1]], start[t[2]])));
+        });
+    }
+    grid.reset(4 * radius + 1e-9, 4 * edges.size() + 64);
+    for (std::size_t e = 0; e < edges.size(); ++e) grid.insert(int(e), boxOf(edges[e].data(), 2));
+    for (std::size_t e = 0; e < edges.size(); ++e) {
+        const auto& x = edges[e];
+        grid.query(boxOf(x.data(), 2), [&](int g) {
+            const auto& y = edges[std::size_t(g)];
+            if (x[0] == y[0] || x[0] == y[1] || x[1] == y[0] || x[1] == y[1]) return;
+            best = std::min(best, std::sqrt(segmentSegmentDistanceSquared(start[x[0]], start[x[1]], start[y[0]], start[y[1]])));
+        });
+    }
+    return best;
 }
 
 } // namespace riemesh

@@ -112,6 +112,7 @@ TEST_CASE("ccd: a sphere driven into another in one big step stops before the fa
     CHECK(stats.collisions > 0);
     CHECK(stats.shortened > 0);
     CHECK(findSelfIntersections(mesh).count() == 0);
+    CHECK(minimumSeparation(mesh, 0.01) >= so.minSeparation); // never closer than eta
     // The far side moved the whole step; the near side was held back, still to the right of the
     // first sphere.
     double leftmost = 1e9, rightmost = -1e9;

@@ -35,7 +35,7 @@ struct CcdResult {
 
 /// Additive CCD of point p moving linearly p0 -> p1 against the triangle (a, b, c) moving
 /// a0 -> a1, ...: does their distance fall below `eta` + gapFraction (d0 - eta) during t in [0, 1]
-/// (d0: the distance at t = 0)? When the primitives start closer than eta, eta is taken as d0 / 2.
+/// (d0: the distance at t = 0)? When the primitives start closer than eta, eta is taken as 0.999 d0.
 /// Conservative: a pair that comes within eta is always reported; when it is, toi is a time at
 /// which the distance is still at least that gap (0 when the primitives start touching).
 CcdResult pointTriangleCcd(const Vec3& p0, const Vec3& a0, const Vec3& b0, const Vec3& c0, const Vec3& p1,
@@ -72,5 +72,9 @@ SafeStepStats limitStepToCollisionFree(Mesh& mesh, const std::vector<Vec3>& star
 /// anywhere but where they share vertices (exact; the classification of findSelfIntersections).
 /// O(faces of the mesh): for occasional edits (a tunnel cut); regularity uses a spatial grid.
 bool facesMeetMesh(const Mesh& mesh, const std::vector<FaceHandle>& faces);
+
+/// The smallest distance between a vertex and a face, or two edges, that share no vertex (world
+/// units); `radius` when none is closer than that (only pairs within radius are measured).
+double minimumSeparation(const Mesh& mesh, double radius);
 
 } // namespace riemesh
