@@ -154,8 +154,23 @@ SafeStepStats limitStepToCollisionFree(Mesh& mesh, const std::vector<Vec3>& star
     const std::size_t n = mesh.n_vertices();
     if (n == 0 || start.size() < n) return stats;
     const double eta = options.minSeparation;
-    std::vector<Vec3> end(n);
-    std::vector<char> moves(n, 0);
+    // Buffers kept for the next step (no allocation once they have grown).
+    struct Scratch {
+        std::vector<Vec3> end;
+        std::vector<char> moves, changed;
+        std::vector<std::array<int, 3>> faces;
+        std::vector<std::array<int, 2>> edges;
+        std::vector<Box6> faceBox, edgeBox;
+        std::vector<double> reach, alpha, factor;
+        std::vector<int> touched;
+        std::vector<std::array<int, 3>> candidates;
+        detail::PackedBoxGrid grid;
+    };
+    static thread_local Scratch scratch;
+    std::vector<Vec3>& end = scratch.end;
+    std::vector<char>& moves = scratch.moves;
+    end.resize(n);
+    moves.assign(n, 0);
     bool any = false;
     for (auto v : mesh.vertices()) {
         const std::size_t i = std::size_t(v.idx());
@@ -165,15 +180,15 @@ SafeStepStats limitStepToCollisionFree(Mesh& mesh, const std::vector<Vec3>& star
     }
     if (!any) return stats;
 
-    std::vector<std::array<int, 3>> faces;
-    faces.reserve(mesh.n_faces());
+    std::vector<std::array<int, 3>>& faces = scratch.faces;
+    faces.clear();
     for (auto f : mesh.faces()) {
         const HalfedgeHandle h = mesh.halfedge_handle(f);
         faces.push_back({mesh.from_vertex_handle(h).idx(), mesh.to_vertex_handle(h).idx(),
                          mesh.to_vertex_handle(mesh.next_halfedge_handle(h)).idx()});
     }
-    std::vector<std::array<int, 2>> edges;
-    edges.reserve(mesh.n_edges());
+    std::vector<std::array<int, 2>>& edges = scratch.edges;
+    edges.clear();
     for (auto e : mesh.edges()) {
         const HalfedgeHandle h = mesh.halfedge_handle(e, 0);
         edges.push_back({mesh.from_vertex_handle(h).idx(), mesh.to_vertex_handle(h).idx()});
@@ -190,7 +205,8 @@ SafeStepStats limitStepToCollisionFree(Mesh& mesh, const std::vector<Vec3>& star
     auto grow = [](Box6& b, double r) {
         for (int k = 0; k < 3; ++k) b[k] -= r, b[k + 3] += r;
     };
-    std::vector<Box6> faceBox(faces.size());
+    std::vector<Box6>& faceBox = scratch.faceBox;
+    faceBox.resize(faces.size());
     double extent = 0;
     for (std::size_t f = 0; f < faces.size(); ++f) {
         Box6 b = {inf, inf, inf, -inf, -inf, -inf};
@@ -209,7 +225,8 @@ SafeStepStats limitStepToCollisionFree(Mesh& mesh, const std::vector<Vec3>& star
     // A pair whose distance at the start exceeds eta by more than the longest motions of both
     // primitives together cannot come within eta however its vertices' motions are shortened:
     // it is never stored (most pairs, since most vertices barely move).
-    std::vector<double> reach(n, 0.0);
+    std::vector<double>& reach = scratch.reach;
+    reach.assign(n, 0.0);
     for (auto v : mesh.vertices()) {
         const std::size_t i = std::size_t(v.idx());
         if (moves[i]) reach[i] = (end[i] - start[i]).norm();
@@ -218,10 +235,10 @@ SafeStepStats limitStepToCollisionFree(Mesh& mesh, const std::vector<Vec3>& star
         const double r = motion + eta;
         return distanceSquared > r * r * 1.0000001;
     };
-    std::vector<Candidate> candidates;
-    detail::BoxGrid grid;
-    grid.reset(cell, 4 * faces.size());
-    for (std::size_t f = 0; f < faces.size(); ++f) grid.insert(int(f), faceBox[f]);
+    std::vector<std::array<int, 3>>& candidates = scratch.candidates; // (kind, a, b), see Candidate
+    candidates.clear();
+    detail::PackedBoxGrid& grid = scratch.grid;
+    grid.build(faceBox, cell);
     for (auto v : mesh.vertices()) {
         const int i = v.idx();
         Box6 b = {inf, inf, inf, -inf, -inf, -inf};
@@ -239,16 +256,16 @@ SafeStepStats limitStepToCollisionFree(Mesh& mesh, const std::vector<Vec3>& star
             candidates.push_back({0, i, f});
         });
     }
-    grid.reset(cell, 4 * edges.size());
-    std::vector<Box6> edgeBox(edges.size());
+    std::vector<Box6>& edgeBox = scratch.edgeBox;
+    edgeBox.resize(edges.size());
     for (std::size_t e = 0; e < edges.size(); ++e) {
         Box6 b = {inf, inf, inf, -inf, -inf, -inf};
         sweep(b, edges[e][0]);
         sweep(b, edges[e][1]);
         grow(b, 0.5 * eta);
         edgeBox[e] = b;
-        grid.insert(int(e), b);
     }
+    grid.build(edgeBox, cell);
     for (std::size_t e = 0; e < edges.size(); ++e) {
         const auto& x = edges[e];
         grid.query(edgeBox[e], [&](int g) {
@@ -268,9 +285,14 @@ SafeStepStats limitStepToCollisionFree(Mesh& mesh, const std::vector<Vec3>& star
     stats.candidates = candidates.size();
 
     // Rounds: test (again) the pairs with a vertex whose motion changed, shorten the colliding ones.
-    std::vector<double> alpha(n, 1.0), factor(n, 1.0);
-    std::vector<char> changed(n, 1);
-    std::vector<int> touched;
+    std::vector<double>& alpha = scratch.alpha;
+    std::vector<double>& factor = scratch.factor;
+    std::vector<char>& changed = scratch.changed;
+    std::vector<int>& touched = scratch.touched;
+    alpha.assign(n, 1.0);
+    factor.assign(n, 1.0);
+    changed.assign(n, 1);
+    touched.clear();
     auto at = [&](int v) -> Vec3 {
         const std::size_t i = std::size_t(v);
         return alpha[i] == 1.0 ? end[i] : Vec3(start[i] + alpha[i] * (end[i] - start[i]));
@@ -279,7 +301,8 @@ SafeStepStats limitStepToCollisionFree(Mesh& mesh, const std::vector<Vec3>& star
         stats.rounds = round + 1;
         bool hit = false;
         const double shorten = round < options.shortenRounds ? options.shorten : 0.0;
-        for (const Candidate& c : candidates) {
+        for (const auto& entry : candidates) {
+            const Candidate c{entry[0], entry[1], entry[2]};
             std::array<int, 4> v;
             if (c.kind == 0) {
                 const auto& t = faces[std::size_t(c.b)];

@@ -55,6 +55,9 @@ void printVdb2MeshUsage(std::FILE* out)
         "                       image (their maxima, grown by a block: the object's thin parts kept),\n"
         "                       then halve down to the image itself; auto (default) leaves the coarsest\n"
         "                       level about 16 edges across the image; 0 = the image only\n"
+        "  --allow-crossings    no intersection-free guarantee (continuous collision detection of every\n"
+        "                       step, collapses and flips refused where faces would cross): faster, and\n"
+        "                       the result may have crossing faces\n"
         "  --init I             box (default): a box around each separate part of the object (found on\n"
         "                       the coarsest level), deflating; the image box when no part is found\n"
         "                       sphere:X,Y,Z,R[;X,Y,Z,R...]  bubbles, world units, inflating\n"
@@ -173,6 +176,7 @@ Vdb2MeshArgs parseVdb2MeshArgs(int argc, const char* const* argv)
         else if (f == "--threads") a.threads = int(parseCount(f, value(), 1, 65536));
         else if (f == "-q" || f == "--quiet") a.quiet = true;
         else if (f == "--open-borders") a.openBorders = true;
+        else if (f == "--allow-crossings") a.allowCrossings = true;
         else if (f == "--downsample") a.downsample = int(parseCount(f, value(), 1, 64));
         else if (f == "--levels") {
             const std::string v = value();

@@ -148,4 +148,112 @@ private:
     std::vector<int> mLarge; ///< items whose box spans too many cells: tested by every query
 };
 
+/// A BoxGrid built once from all its boxes, laid out for speed: the entries of a bucket are
+/// contiguous (16 bytes each: cell and item), the boxes are read from the caller's array, so that a
+/// query reads memory mostly in order (the collision-safe step queries it once per vertex and edge
+/// of the mesh, every iteration). Same reports as BoxGrid::query. Buffers are kept between builds.
+class PackedBoxGrid {
+public:
+    /// Items 0..boxes.size()-1 with those boxes (the array must stay alive and unchanged while
+    /// the grid is queried); cells of side cellSize > 0 (world units).
+    void build(const std::vector<Box6>& boxes, double cellSize)
+    {
+        mBoxes = &boxes;
+        mInvCell = 1.0 / cellSize;
+        mLarge.clear();
+        mTemp.clear();
+        for (std::size_t i = 0; i < boxes.size(); ++i) {
+            std::array<std::int64_t, 6> c{};
+            if (!cellRange(boxes[i], c)) {
+                mLarge.push_back(std::int32_t(i));
+                continue;
+            }
+            for (std::int64_t x = c[0]; x <= c[3]; ++x)
+                for (std::int64_t y = c[1]; y <= c[4]; ++y)
+                    for (std::int64_t z = c[2]; z <= c[5]; ++z) mTemp.push_back({pack(x, y, z), std::int32_t(i), 0});
+        }
+        std::size_t buckets = 64;
+        while (buckets < mTemp.size() && buckets < (std::size_t(1) << 26)) buckets *= 2;
+        mBits = 0;
+        while ((std::size_t(1) << mBits) < buckets) ++mBits;
+        mStart.assign(buckets + 1, 0);
+        for (Entry& e : mTemp) {
+            e.bucket = std::uint32_t(bucket(e.key));
+            ++mStart[e.bucket + 1];
+        }
+        for (std::size_t b = 0; b < buckets; ++b) mStart[b + 1] += mStart[b];
+        mEntries.resize(mTemp.size());
+        mFill.assign(mStart.begin(), mStart.end() - 1);
+        for (const Entry& e : mTemp) mEntries[mFill[e.bucket]++] = e;
+    }
+
+    /// Calls f(item) once for every item whose box overlaps `q`.
+    template <class F>
+    void query(const Box6& q, F&& f) const
+    {
+        const std::vector<Box6>& boxes = *mBoxes;
+        for (const std::int32_t item : mLarge)
+            if (boxesOverlap(q, boxes[std::size_t(item)])) f(int(item));
+        std::array<std::int64_t, 6> c{};
+        if (!cellRange(q, c)) { // a query box too large for the cells: every item in cells
+            for (std::size_t i = 0; i < boxes.size(); ++i) {
+                std::array<std::int64_t, 6> b{};
+                if (cellRange(boxes[i], b) && boxesOverlap(q, boxes[i])) f(int(i));
+            }
+            return;
+        }
+        for (std::int64_t x = c[0]; x <= c[3]; ++x)
+            for (std::int64_t y = c[1]; y <= c[4]; ++y)
+                for (std::int64_t z = c[2]; z <= c[5]; ++z) {
+                    const std::uint64_t key = pack(x, y, z);
+                    const std::size_t b = bucket(key);
+                    for (std::uint32_t i = mStart[b], end = mStart[b + 1]; i < end; ++i) {
+                        const Entry& e = mEntries[i];
+                        if (e.key != key) continue;
+                        const Box6& box = boxes[std::size_t(e.item)];
+                        if (!boxesOverlap(q, box)) continue;
+                        // Report in the cell of the intersection's lower corner only (the corners
+                        // are only needed when the boxes do not start in the same cell).
+                        if ((x != c[0] && cell(box[0]) != x) || (y != c[1] && cell(box[1]) != y) ||
+                            (z != c[2] && cell(box[2]) != z))
+                            continue;
+                        f(int(e.item));
+                    }
+                }
+    }
+
+private:
+    struct Entry {
+        std::uint64_t key;
+        std::int32_t item;
+        std::uint32_t bucket; // (build only)
+    };
+    static constexpr std::int64_t kMaxSpan = 64;
+    std::int64_t cell(double x) const { return std::int64_t(std::floor(x * mInvCell)); }
+    bool cellRange(const Box6& b, std::array<std::int64_t, 6>& c) const
+    {
+        for (int k = 0; k < 6; ++k) {
+            const double s = b[k] * mInvCell;
+            if (!(std::abs(s) < 1e15)) return false; // non-finite or absurd
+            c[k] = std::int64_t(std::floor(s));
+        }
+        for (int k = 0; k < 3; ++k)
+            if (c[k] > c[k + 3] || c[k + 3] - c[k] > kMaxSpan) return false;
+        return true;
+    }
+    static std::uint64_t pack(std::int64_t x, std::int64_t y, std::int64_t z)
+    {
+        constexpr std::uint64_t m = (std::uint64_t(1) << 21) - 1;
+        return ((std::uint64_t(x) & m) << 42) | ((std::uint64_t(y) & m) << 21) | (std::uint64_t(z) & m);
+    }
+    std::size_t bucket(std::uint64_t key) const { return std::size_t((key * 0x9E3779B97F4A7C15ull) >> (64 - mBits)); }
+
+    const std::vector<Box6>* mBoxes = nullptr;
+    double mInvCell = 1.0;
+    int mBits = 6;
+    std::vector<std::uint32_t> mStart, mFill;
+    std::vector<Entry> mEntries, mTemp;
+    std::vector<std::int32_t> mLarge;
+};
+
 } // namespace riemesh::detail
