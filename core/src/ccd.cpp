@@ -249,6 +249,15 @@ SafeStepStats limitStepToCollisionFree(Mesh& mesh, const std::vector<Vec3>& star
             const double motion = reach[std::size_t(i)] + std::max({reach[std::size_t(t[0])], reach[std::size_t(t[1])],
                                                                      reach[std::size_t(t[2])]});
             if (motion == 0) return;
+            // A cheap lower bound first: the distance to the centroid less the farthest corner's.
+            const Vec3& p = start[std::size_t(i)];
+            const Vec3& a = start[std::size_t(t[0])];
+            const Vec3& b = start[std::size_t(t[1])];
+            const Vec3& c = start[std::size_t(t[2])];
+            const Vec3 centroid = (a + b + c) / 3.0;
+            const double radius = std::sqrt(std::max({(a - centroid).squaredNorm(), (b - centroid).squaredNorm(),
+                                                      (c - centroid).squaredNorm()}));
+            if ((p - centroid).norm() - radius > (motion + eta) * 1.0000001) return;
             if (outOfReach(pointTriangleDistanceSquared(start[std::size_t(i)], start[std::size_t(t[0])],
                                                         start[std::size_t(t[1])], start[std::size_t(t[2])]),
                            motion))
@@ -275,6 +284,13 @@ SafeStepStats limitStepToCollisionFree(Mesh& mesh, const std::vector<Vec3>& star
             const double motion = std::max(reach[std::size_t(x[0])], reach[std::size_t(x[1])]) +
                                   std::max(reach[std::size_t(y[0])], reach[std::size_t(y[1])]);
             if (motion == 0) return;
+            // A cheap lower bound first: the midpoints' distance less the half lengths.
+            const Vec3& a0 = start[std::size_t(x[0])];
+            const Vec3& a1 = start[std::size_t(x[1])];
+            const Vec3& b0 = start[std::size_t(y[0])];
+            const Vec3& b1 = start[std::size_t(y[1])];
+            const double bound = 0.5 * ((a0 + a1 - b0 - b1).norm() - (a1 - a0).norm() - (b1 - b0).norm());
+            if (bound > (motion + eta) * 1.0000001) return;
             if (outOfReach(segmentSegmentDistanceSquared(start[std::size_t(x[0])], start[std::size_t(x[1])],
                                                          start[std::size_t(y[0])], start[std::size_t(y[1])]),
                            motion))

@@ -13,6 +13,7 @@
 #include <array>
 #include <cmath>
 #include <cstdint>
+#include <limits>
 #include <vector>
 
 namespace riemesh::detail {
@@ -149,56 +150,67 @@ private:
 };
 
 /// A BoxGrid built once from all its boxes, laid out for speed: the entries of a bucket are
-/// contiguous (16 bytes each: cell and item), the boxes are read from the caller's array, so that a
-/// query reads memory mostly in order (the collision-safe step queries it once per vertex and edge
-/// of the mesh, every iteration). Same reports as BoxGrid::query. Buffers are kept between builds.
+/// contiguous and carry their item's box (in floats rounded outward: 40 bytes an entry), so that a
+/// query reads memory in order (the collision-safe step queries it once per vertex and edge of the
+/// mesh, every iteration). Reports every item whose box overlaps the query, once (the float boxes
+/// are a little larger than the given ones: a few more reports, never fewer). Buffers are kept
+/// between builds.
 class PackedBoxGrid {
 public:
-    /// Items 0..boxes.size()-1 with those boxes (the array must stay alive and unchanged while
-    /// the grid is queried); cells of side cellSize > 0 (world units).
+    /// Items 0..boxes.size()-1 with those boxes; cells of side cellSize > 0 (world units).
     void build(const std::vector<Box6>& boxes, double cellSize)
     {
-        mBoxes = &boxes;
         mInvCell = 1.0 / cellSize;
         mLarge.clear();
         mTemp.clear();
         for (std::size_t i = 0; i < boxes.size(); ++i) {
+            Entry e{0, std::int32_t(i), {}};
+            for (int k = 0; k < 3; ++k) {
+                e.box[k] = down(boxes[i][k]);
+                e.box[k + 3] = up(boxes[i][k + 3]);
+            }
             std::array<std::int64_t, 6> c{};
-            if (!cellRange(boxes[i], c)) {
-                mLarge.push_back(std::int32_t(i));
+            if (!cellRange(e.box, c)) {
+                mLarge.push_back(e);
                 continue;
             }
             for (std::int64_t x = c[0]; x <= c[3]; ++x)
                 for (std::int64_t y = c[1]; y <= c[4]; ++y)
-                    for (std::int64_t z = c[2]; z <= c[5]; ++z) mTemp.push_back({pack(x, y, z), std::int32_t(i), 0});
+                    for (std::int64_t z = c[2]; z <= c[5]; ++z) {
+                        e.key = pack(x, y, z);
+                        mTemp.push_back(e);
+                    }
         }
         std::size_t buckets = 64;
         while (buckets < mTemp.size() && buckets < (std::size_t(1) << 26)) buckets *= 2;
         mBits = 0;
         while ((std::size_t(1) << mBits) < buckets) ++mBits;
         mStart.assign(buckets + 1, 0);
-        for (Entry& e : mTemp) {
-            e.bucket = std::uint32_t(bucket(e.key));
-            ++mStart[e.bucket + 1];
+        mBucket.resize(mTemp.size());
+        for (std::size_t t = 0; t < mTemp.size(); ++t) {
+            mBucket[t] = std::uint32_t(bucket(mTemp[t].key));
+            ++mStart[mBucket[t] + 1];
         }
         for (std::size_t b = 0; b < buckets; ++b) mStart[b + 1] += mStart[b];
         mEntries.resize(mTemp.size());
         mFill.assign(mStart.begin(), mStart.end() - 1);
-        for (const Entry& e : mTemp) mEntries[mFill[e.bucket]++] = e;
+        for (std::size_t t = 0; t < mTemp.size(); ++t) mEntries[mFill[mBucket[t]]++] = mTemp[t];
     }
+
 
     /// Calls f(item) once for every item whose box overlaps `q`.
     template <class F>
     void query(const Box6& q, F&& f) const
     {
-        const std::vector<Box6>& boxes = *mBoxes;
-        for (const std::int32_t item : mLarge)
-            if (boxesOverlap(q, boxes[std::size_t(item)])) f(int(item));
+        for (const Entry& e : mLarge)
+            if (overlaps(q, e.box)) f(int(e.item));
         std::array<std::int64_t, 6> c{};
-        if (!cellRange(q, c)) { // a query box too large for the cells: every item in cells
-            for (std::size_t i = 0; i < boxes.size(); ++i) {
+        const std::array<float, 6> qf = {down(q[0]), down(q[1]), down(q[2]), up(q[3]), up(q[4]), up(q[5])};
+        if (!cellRange(qf, c)) { // a query box too large for the cells: every entry, once per item
+            for (const Entry& e : mEntries) {
                 std::array<std::int64_t, 6> b{};
-                if (cellRange(boxes[i], b) && boxesOverlap(q, boxes[i])) f(int(i));
+                cellRange(e.box, b);
+                if (e.key == pack(b[0], b[1], b[2]) && overlaps(q, e.box)) f(int(e.item));
             }
             return;
         }
@@ -209,13 +221,11 @@ public:
                     const std::size_t b = bucket(key);
                     for (std::uint32_t i = mStart[b], end = mStart[b + 1]; i < end; ++i) {
                         const Entry& e = mEntries[i];
-                        if (e.key != key) continue;
-                        const Box6& box = boxes[std::size_t(e.item)];
-                        if (!boxesOverlap(q, box)) continue;
-                        // Report in the cell of the intersection's lower corner only (the corners
-                        // are only needed when the boxes do not start in the same cell).
-                        if ((x != c[0] && cell(box[0]) != x) || (y != c[1] && cell(box[1]) != y) ||
-                            (z != c[2] && cell(box[2]) != z))
+                        if (e.key != key || !overlaps(q, e.box)) continue;
+                        // Report in the cell of the intersection's lower corner only (the item's
+                        // own lower cell matters only where the query starts before this cell).
+                        if ((x != c[0] && cell(e.box[0]) != x) || (y != c[1] && cell(e.box[1]) != y) ||
+                            (z != c[2] && cell(e.box[2]) != z))
                             continue;
                         f(int(e.item));
                     }
@@ -226,19 +236,35 @@ private:
     struct Entry {
         std::uint64_t key;
         std::int32_t item;
-        std::uint32_t bucket; // (build only)
+        std::array<float, 6> box; ///< lo xyz, hi xyz, rounded outward
     };
     static constexpr std::int64_t kMaxSpan = 64;
-    std::int64_t cell(double x) const { return std::int64_t(std::floor(x * mInvCell)); }
-    bool cellRange(const Box6& b, std::array<std::int64_t, 6>& c) const
+    static float down(double x)
+    {
+        float f = float(x);
+        if (double(f) > x) f = std::nextafter(f, -std::numeric_limits<float>::infinity());
+        return f;
+    }
+    static float up(double x)
+    {
+        float f = float(x);
+        if (double(f) < x) f = std::nextafter(f, std::numeric_limits<float>::infinity());
+        return f;
+    }
+    static bool overlaps(const Box6& q, const std::array<float, 6>& b)
+    {
+        return q[0] <= b[3] && b[0] <= q[3] && q[1] <= b[4] && b[1] <= q[4] && q[2] <= b[5] && b[2] <= q[5];
+    }
+    std::int64_t cell(float x) const { return std::int64_t(std::floor(double(x) * mInvCell)); }
+    bool cellRange(const std::array<float, 6>& b, std::array<std::int64_t, 6>& c) const
     {
         for (int k = 0; k < 6; ++k) {
-            const double s = b[k] * mInvCell;
+            const double s = double(b[std::size_t(k)]) * mInvCell;
             if (!(std::abs(s) < 1e15)) return false; // non-finite or absurd
-            c[k] = std::int64_t(std::floor(s));
+            c[std::size_t(k)] = std::int64_t(std::floor(s));
         }
         for (int k = 0; k < 3; ++k)
-            if (c[k] > c[k + 3] || c[k + 3] - c[k] > kMaxSpan) return false;
+            if (c[std::size_t(k)] > c[std::size_t(k) + 3] || c[std::size_t(k) + 3] - c[std::size_t(k)] > kMaxSpan) return false;
         return true;
     }
     static std::uint64_t pack(std::int64_t x, std::int64_t y, std::int64_t z)
@@ -248,12 +274,10 @@ private:
     }
     std::size_t bucket(std::uint64_t key) const { return std::size_t((key * 0x9E3779B97F4A7C15ull) >> (64 - mBits)); }
 
-    const std::vector<Box6>* mBoxes = nullptr;
     double mInvCell = 1.0;
     int mBits = 6;
-    std::vector<std::uint32_t> mStart, mFill;
-    std::vector<Entry> mEntries, mTemp;
-    std::vector<std::int32_t> mLarge;
+    std::vector<std::uint32_t> mStart, mFill, mBucket;
+    std::vector<Entry> mEntries, mTemp, mLarge;
 };
 
 } // namespace riemesh::detail
