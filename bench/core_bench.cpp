@@ -15,6 +15,7 @@
 // run does not end as one converged genus-0 surface; times are printed, never checked).
 #include "riemesh/evolution.h"
 #include "riemesh/primitives.h"
+#include "riemesh/self_intersection.h"
 #include "riemesh/threads.h"
 
 #include <memory>
@@ -405,8 +406,10 @@ int fullRuns(bool quick)
 {
     int unexpected = 0;
     std::printf("\n# full runs from the default initialisation (box deflating)\n");
-    std::printf("%-10s %-11s %6s %6s %9s %7s %9s %9s %5s %5s %-10s\n", "scene", "metric", "scale", "delta",
-                "vertices", "iters", "ms/iter", "seconds", "comp", "genus", "stop");
+    // guard: EvolutionOptions::intersectionFree (on, the default, then off: same run, the ratio of
+    // their times after the second); crossings: face pairs of the result that cross.
+    std::printf("%-10s %-11s %6s %6s %-5s %9s %7s %9s %9s %5s %5s %9s %-10s\n", "scene", "metric", "scale", "delta",
+                "guard", "vertices", "iters", "ms/iter", "seconds", "comp", "genus", "crossings", "stop");
     std::vector<double> scales = quick ? std::vector<double>{1.0} : std::vector<double>{1.0, 2.0};
     for (double scale : scales) {
         std::vector<Scene> scenes = {
@@ -418,25 +421,32 @@ int fullRuns(bool quick)
         for (const auto& s : scenes) {
             const auto image = fog(s);
             for (int riemannian = 0; riemannian < 2; ++riemannian) {
-                EvolutionOptions o;
-                o.delta = riemannian ? 3.0 * scale : 1.5 * scale;
-                o.maxIterations = 3000;
-                EuclideanMetric euclidean;
-                MetricGrids contour;
-                if (riemannian) contour = contourMetric(s.sdf, s.bounds, 4.0);
-                const MetricField& metric = riemannian ? static_cast<const MetricField&>(*contour.metric) : euclidean;
-                Mesh mesh = makeInitialBox(image, 2.0 * o.delta);
-                const auto stats = evolve(mesh, image, metric, o);
-                const auto t = topologyOf(mesh);
-                std::printf("%-10s %-11s %6.0f %6.2f %9zu %7zu %9.3f %9.3f %5d %5d %-10s\n", s.name.c_str(),
-                            riemannian ? "riemannian" : "euclidean", scale, o.delta, t.vertices,
-                            stats.iterations.size(), 1000.0 * stats.seconds / std::max<size_t>(1, stats.iterations.size()),
-                            stats.seconds, t.components, t.genus, toString(stats.reason));
-                if (t.components != 1 || t.genus != 0 || stats.reason != StopReason::Converged) {
-                    std::printf("  ^ unexpected: the %s should end as one converged genus-0 surface\n", s.name.c_str());
-                    ++unexpected;
+                double guarded = 0;
+                for (int guard = 1; guard >= 0; --guard) {
+                    EvolutionOptions o;
+                    o.intersectionFree = guard != 0;
+                    o.delta = riemannian ? 3.0 * scale : 1.5 * scale;
+                    o.maxIterations = 3000;
+                    EuclideanMetric euclidean;
+                    MetricGrids contour;
+                    if (riemannian) contour = contourMetric(s.sdf, s.bounds, 4.0);
+                    const MetricField& metric = riemannian ? static_cast<const MetricField&>(*contour.metric) : euclidean;
+                    Mesh mesh = makeInitialBox(image, 2.0 * o.delta);
+                    const auto stats = evolve(mesh, image, metric, o);
+                    const auto t = topologyOf(mesh);
+                    const std::size_t crossings = findSelfIntersections(mesh).count();
+                    std::printf("%-10s %-11s %6.0f %6.2f %-5s %9zu %7zu %9.3f %9.3f %5d %5d %9zu %-10s\n", s.name.c_str(),
+                                riemannian ? "riemannian" : "euclidean", scale, o.delta, guard ? "on" : "off", t.vertices,
+                                stats.iterations.size(), 1000.0 * stats.seconds / std::max<size_t>(1, stats.iterations.size()),
+                                stats.seconds, t.components, t.genus, crossings, toString(stats.reason));
+                    if (guard) guarded = stats.seconds;
+                    else std::printf("  guard on / off: %.2fx the time\n", guarded / std::max(stats.seconds, 1e-9));
+                    if (t.components != 1 || t.genus != 0 || stats.reason != StopReason::Converged) {
+                        std::printf("  ^ unexpected: the %s should end as one converged genus-0 surface\n", s.name.c_str());
+                        ++unexpected;
+                    }
+                    std::fflush(stdout);
                 }
-                std::fflush(stdout);
             }
         }
     }

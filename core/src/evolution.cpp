@@ -1,5 +1,6 @@
 #include "riemesh/evolution.h"
 
+#include "riemesh/ccd.h"
 #include "riemesh/collision.h"
 #include "riemesh/primitives.h"
 #include "riemesh/regularity.h"
@@ -195,13 +196,23 @@ IterationStats Evolution::step()
     io.damping = o.damping;
     io.vmax = vmax;
     io.movingSpeed = 0.5 * forces.externalLimit * o.delta / std::max(o.damping, 1e-9); // half the terminal speed F/gamma
+    if (o.intersectionFree) { // the start of the step, for its collision check
+        mStepStart.resize(mMesh.n_vertices());
+        for (auto v : mMesh.vertices()) mStepStart[std::size_t(v.idx())] = position(mMesh, v);
+    }
     const IntegrationStats is = integrate(mMesh, mForces, io);
+    if (o.intersectionFree) {
+        SafeStepOptions so;
+        so.minSeparation = o.minSeparation * o.delta;
+        limitStepToCollisionFree(mMesh, mStepStart, so);
+    }
     vertexMetrics.update(); // every vertex that moved
     phase(it.phases.integration);
 
     RegularityOptions ro;
     ro.delta = o.delta;
     ro.zeta = o.zeta;
+    ro.intersectionFree = o.intersectionFree;
     if (mLevel > 0 && int(mHistory.size()) - mLevelStart < o.levelSettleIterations) {
         const double c = std::min(o.levelSettleFactor, 0.5 * o.zeta); // halves of a split edge stay >= c delta
         ro.delta = c * o.delta;

@@ -23,6 +23,7 @@
 #include "riemesh/edge_ops.h"
 
 #include "detail/edge_guards.h"
+#include "detail/intersection_guard.h"
 #include "detail/parallel.h"
 
 #include <algorithm>
@@ -31,6 +32,7 @@
 #include <cmath>
 #include <cstdint>
 #include <functional>
+#include <memory>
 #include <stdexcept>
 #include <tuple>
 
@@ -73,6 +75,7 @@ public:
         : mMesh(mesh), mMetric(metric), mVertexMetrics(mesh, metric), mStats(stats), mLo(options.delta),
           mHi(options.zeta * options.delta)
     {
+        if (options.intersectionFree) mGuard = std::make_unique<detail::IntersectionGuard>(mesh);
     }
 
     /// Euclidean length of edge e (world units).
@@ -239,6 +242,7 @@ public:
     {
         if (mValence.size() < mMesh.n_vertices()) mValence.resize(mMesh.n_vertices(), 0);
         mValence[std::size_t(v.idx())] = int(mMesh.valence(v));
+        if (mGuard) mGuard->update(v);
         touch(v);
         for (auto n = mMesh.cvv_begin(v); n.is_valid(); ++n) {
             mValence[std::size_t(n->idx())] = int(mMesh.valence(*n));
@@ -388,11 +392,13 @@ public:
     {
         const EdgeHandle e(i);
         if (!isFlipWanted(e)) return false;
+        if (mGuard && !mGuard->isFlipSafe(e)) return false; // would make faces cross
         const HalfedgeHandle h = mMesh.halfedge_handle(e, 0), o = mMesh.halfedge_handle(e, 1);
         const VertexHandle u = mMesh.from_vertex_handle(h), v = mMesh.to_vertex_handle(h);
         const VertexHandle a = mMesh.to_vertex_handle(mMesh.next_halfedge_handle(h));
         const VertexHandle b = mMesh.to_vertex_handle(mMesh.next_halfedge_handle(o));
         detail::flipUnchecked(mMesh, e);
+        if (mGuard) mGuard->update(a);
         --mValence[u.idx()];
         --mValence[v.idx()];
         ++mValence[a.idx()];
@@ -460,6 +466,7 @@ private:
             if (obstacles & ~detail::kCollapseGeometry) return;
             if (obstacles) continue;
             if (!keepsEdgesShortEnough(u, v, target)) continue;
+            if (mGuard && !mGuard->isCollapseSafe(hh, target)) continue;
             collapseAndRequeue(hh, target);
             return;
         }
@@ -500,6 +507,7 @@ private:
                     const Vec3 target = position(mMesh, mMesh.to_vertex_handle(*oh)); // the neighbour stays
                     if (detail::collapseObstacles(mMesh, *oh, target) != 0) continue;
                     if (!keepsEdgesShortEnough(x, mMesh.to_vertex_handle(*oh), target)) continue;
+                    if (mGuard && !mGuard->isCollapseSafe(*oh, target)) continue;
                     collapseAndRequeue(*oh, target);
                     mCap.erase(mCap.begin() + std::ptrdiff_t(i));
                     progress = true;
@@ -612,6 +620,7 @@ private:
     std::vector<int> mFlipQueue;      ///< edges around the flips of a sweep, ahead of it (min-heap)
     int mCollapses = 0;             ///< collapses of the current collapse stage
     std::vector<VertexHandle> mCap; ///< the vertices of a small cap being dissolved
+    std::unique_ptr<detail::IntersectionGuard> mGuard; ///< options.intersectionFree
 };
 
 } // namespace

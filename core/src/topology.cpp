@@ -7,6 +7,8 @@
 // per topology change, which are rare events).
 #include "riemesh/topology.h"
 
+#include "riemesh/ccd.h"
+
 #include "detail/mesh_walk.h"
 #include "detail/triangle_intersection.h"
 
@@ -456,22 +458,37 @@ bool cutTunnel(Mesh& mesh, VertexHandle u, VertexHandle v, VertexHandle w)
         return false;
     }
 
-    // Pull each cap a quarter of the way into its own side so the caps no longer coincide.
-    constexpr double kPull = 0.25;
-    std::array<Mesh::Point, 6> target;
+    // Pull each cap a quarter of the way into its own side so the caps no longer coincide; less
+    // when that would make faces cross (issue 17), and no cut when even a small pull would.
     const std::array<VertexHandle, 6> moved{u, v, w, copy[0], copy[1], copy[2]};
+    std::array<Mesh::Point, 6> origin, centroid;
     for (int i = 0; i < 6; ++i) {
-        Mesh::Point centroid(0, 0, 0);
+        origin[i] = centroid[i] = mesh.point(moved[i]);
+        Mesh::Point sum(0, 0, 0);
         int count = 0;
         for (auto x : mesh.vv_range(moved[i])) {
             if (std::find(moved.begin(), moved.end(), x) != moved.end()) continue;
-            centroid += mesh.point(x);
+            sum += mesh.point(x);
             ++count;
         }
-        target[i] = mesh.point(moved[i]);
-        if (count) target[i] += kPull * (centroid / count - target[i]);
+        if (count) centroid[i] = sum / count;
     }
-    for (int i = 0; i < 6; ++i) mesh.set_point(moved[i], target[i]);
+    std::vector<FaceHandle> pulled;
+    for (const VertexHandle x : moved)
+        for (auto f : mesh.vf_range(x))
+            if (std::find(pulled.begin(), pulled.end(), f) == pulled.end()) pulled.push_back(f);
+    bool embedded = false;
+    for (const double pull : {0.25, 0.1, 0.03}) {
+        for (int i = 0; i < 6; ++i) mesh.set_point(moved[i], origin[i] + pull * (centroid[i] - origin[i]));
+        if (!facesMeetMesh(mesh, pulled)) {
+            embedded = true;
+            break;
+        }
+    }
+    if (!embedded) {
+        mesh = backup;
+        return false;
+    }
 
     tagCut(mesh, std::vector<VertexHandle>(moved.begin(), moved.end()), 2);
     return true;

@@ -232,6 +232,7 @@ StressCase makeCase(std::uint64_t seed)
     double feature = 1e9;
     for (const auto& p : c.parts) feature = std::min(feature, p.torus ? p.b : p.a);
     EvolutionOptions& o = c.options;
+    o.intersectionFree = true; // strict mode checks the guarantee (issue 17)
     o.zeta = draw.uniform(2.0, 4.0);
     o.delta = std::max(0.5, draw.uniform(0.5, 1.0) * feature / o.zeta);
     o.vmaxFraction = draw.uniform(0.2, 1.0);

@@ -128,6 +128,7 @@ int main(int argc, char** argv)
         options.maxIterations = args.maxIterations;
         options.maxVertices = args.maxVertices;
         options.openBorders = args.openBorders;
+        options.intersectionFree = args.intersectionFree;
         options.downsample = args.downsample;
         options.levels = args.levels;
         options.threads = args.threads;

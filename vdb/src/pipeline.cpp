@@ -277,6 +277,7 @@ PipelineResult meshVolume(Volume& volume, const PipelineOptions& options)
     opt.zeta = options.zeta;
     opt.maxIterations = options.maxIterations;
     opt.maxVertices = options.maxVertices;
+    opt.intersectionFree = options.intersectionFree;
     opt.forces.iso = iso;
     opt.forces.objectBrighter = objectBrighter;
     if (options.progress) opt.progress = [&](const IterationStats& s) { return report(PipelineStage::Evolve, &s); };
@@ -357,6 +358,7 @@ std::string pipelineStatsJson(const PipelineResult& r, const PipelineRecord& rec
                        {"max_iterations", o.maxIterations},
                        {"init", o.init.spec},
                        {"open_borders", o.openBorders},
+                       {"intersection_free", o.intersectionFree},
                        {"border_voxels_added", r.borderVoxels},
                        {"downsample", o.downsample},
                        {"levels", r.levels},

@@ -13,6 +13,9 @@ struct RegularityOptions {
     double zeta = 2.5;   ///< ratio longest/shortest; >= 2.5 keeps halves of a split edge >= delta
     int maxPasses = 4;   ///< split/collapse/flip sweeps per call
     bool flips = true;   ///< flip edges to improve valences and angles
+    /// Refuse the collapses and flips that would make two faces cross (exact tests against the
+    /// faces nearby, issue 17). Splits at an edge's midpoint keep the surface where it is.
+    bool intersectionFree = false;
 };
 
 struct RegularityStats {

@@ -86,6 +86,8 @@ struct PipelineOptions {
     int maxIterations = kMaxIterations;      ///< >= 1
     std::uint64_t maxVertices = kMaxVertices; ///< past it the run fails (PipelineInputError), >= 4
     bool openBorders = false;       ///< do not close objects cut by the image box
+    /// Intersection-free evolution (EvolutionOptions::intersectionFree); --intersection-free sets it.
+    bool intersectionFree = false;
     int downsample = 1;             ///< block-average F^3 voxels first, [1, 64]
     /// Coarse-to-fine levels below the finest (--levels): the model converges first with delta 2^L
     /// on an image of 2^L-voxel blocks, then with half of it, ..., then the image as it is. -1: as

@@ -1,0 +1,475 @@
+// ccd.cpp: distances, Additive CCD and the collision-safe step (see riemesh/ccd.h); the broad
+// phase is a hashed grid of swept boxes (detail/box_grid.h).
+#include "riemesh/ccd.h"
+
+#include "detail/box_grid.h"
+#include "detail/triangle_intersection.h"
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+
+namespace riemesh {
+
+namespace {
+
+using detail::Box6;
+
+double clamp01(double x) { return x < 0 ? 0 : (x > 1 ? 1 : x); }
+
+double pointSegmentDistanceSquared(const Vec3& p, const Vec3& a, const Vec3& b)
+{
+    const Vec3 ab = b - a;
+    const double len2 = ab.squaredNorm();
+    const double t = len2 > 0 ? clamp01((p - a).dot(ab) / len2) : 0.0;
+    return (a + t * ab - p).squaredNorm();
+}
+
+/// ACCD's iterations give up (and report a contact at the time reached) after this many.
+constexpr int kMaxAccdIterations = 2000;
+
+/// Additive CCD (Li et al. 2021, Algorithm 1) over the four points x (start) moving by d: the first
+/// `split` points form one primitive, the rest the other; `distance` gives their distance.
+template <class Distance>
+CcdResult additiveCcd(std::array<Vec3, 4> x, std::array<Vec3, 4> d, int split, double eta, double s, Distance distance)
+{
+    CcdResult result;
+    const Vec3 mean = 0.25 * (d[0] + d[1] + d[2] + d[3]);
+    double lp0 = 0, lp1 = 0;
+    for (int i = 0; i < 4; ++i) {
+        d[i] -= mean;
+        (i < split ? lp0 : lp1) = std::max(i < split ? lp0 : lp1, d[i].norm());
+    }
+    const double lp = lp0 + lp1;
+    if (!(lp > 0)) return result; // no relative motion (or not finite: nothing sensible to do)
+    double dist = distance(x);
+    if (!(dist > 0)) return {true, 0.0};
+    // Closer than eta already (rounding, or an edit of the mesh left them so): they may close in
+    // by 0.1% at most (pressed together for 3000 iterations, they keep 5% of their distance).
+    const double xi = dist > eta ? eta : 0.999 * dist;
+    const double gap = s * (dist - xi);
+    double t = 0;
+    double tl = (1 - s) * (dist - xi) / lp;
+    for (int it = 0; it < kMaxAccdIterations; ++it) {
+        for (int i = 0; i < 4; ++i) x[i] += tl * d[i];
+        dist = distance(x);
+        if (t > 0 && dist - xi < gap) return {true, t};
+        t += tl;
+        if (t > 1) return result;
+        tl = 0.9 * (dist - xi) / lp;
+    }
+    return {true, t};
+}
+
+} // namespace
+
+double pointTriangleDistanceSquared(const Vec3& p, const Vec3& a, const Vec3& b, const Vec3& c)
+{
+    // Ericson, Real-Time Collision Detection 5.1.5, by Voronoi regions.
+    const Vec3 ab = b - a, ac = c - a, ap = p - a;
+    const double d1 = ab.dot(ap), d2 = ac.dot(ap);
+    if (d1 <= 0 && d2 <= 0) return ap.squaredNorm();
+    const Vec3 bp = p - b;
+    const double d3 = ab.dot(bp), d4 = ac.dot(bp);
+    if (d3 >= 0 && d4 <= d3) return bp.squaredNorm();
+    const double vc = d1 * d4 - d3 * d2;
+    if (vc <= 0 && d1 >= 0 && d3 <= 0) {
+        const double den = d1 - d3;
+        const double v = den > 0 ? d1 / den : 0.0;
+        return (a + v * ab - p).squaredNorm();
+    }
+    const Vec3 cp = p - c;
+    const double d5 = ab.dot(cp), d6 = ac.dot(cp);
+    if (d6 >= 0 && d5 <= d6) return cp.squaredNorm();
+    const double vb = d5 * d2 - d1 * d6;
+    if (vb <= 0 && d2 >= 0 && d6 <= 0) {
+        const double den = d2 - d6;
+        const double w = den > 0 ? d2 / den : 0.0;
+        return (a + w * ac - p).squaredNorm();
+    }
+    const double va = d3 * d6 - d5 * d4;
+    if (va <= 0 && (d4 - d3) >= 0 && (d5 - d6) >= 0) {
+        const double den = (d4 - d3) + (d5 - d6);
+        const double w = den > 0 ? (d4 - d3) / den : 0.0;
+        return (b + w * (c - b) - p).squaredNorm();
+    }
+    const double den = va + vb + vc;
+    if (!(den > 0)) // a degenerate triangle: its edges
+        return std::min({pointSegmentDistanceSquared(p, a, b), pointSegmentDistanceSquared(p, b, c),
+                         pointSegmentDistanceSquared(p, c, a)});
+    const double v = vb / den, w = vc / den;
+    const double inside = (a + v * ab + w * ac - p).squaredNorm();
+    // Round-off near a needle: never report more than the distance to an edge.
+    return std::min({inside, pointSegmentDistanceSquared(p, a, b), pointSegmentDistanceSquared(p, b, c),
+                     pointSegmentDistanceSquared(p, c, a)});
+}
+
+double segmentSegmentDistanceSquared(const Vec3& p0, const Vec3& p1, const Vec3& q0, const Vec3& q1)
+{
+    // Ericson 5.1.9, with the parallel and degenerate cases.
+    const Vec3 d1 = p1 - p0, d2 = q1 - q0, r = p0 - q0;
+    const double a = d1.squaredNorm(), e = d2.squaredNorm(), f = d2.dot(r);
+    if (!(a > 0) && !(e > 0)) return r.squaredNorm();
+    if (!(a > 0)) return pointSegmentDistanceSquared(p0, q0, q1);
+    if (!(e > 0)) return pointSegmentDistanceSquared(q0, p0, p1);
+    const double c = d1.dot(r), b = d1.dot(d2);
+    const double denom = a * e - b * b;
+    double s = denom > 1e-14 * a * e ? clamp01((b * f - c * e) / denom) : 0.0;
+    double t = (b * s + f) / e;
+    if (t < 0) {
+        t = 0;
+        s = clamp01(-c / a);
+    } else if (t > 1) {
+        t = 1;
+        s = clamp01((b - c) / a);
+    }
+    const double closest = (p0 + s * d1 - (q0 + t * d2)).squaredNorm();
+    if (denom > 1e-14 * a * e) return closest;
+    // Nearly parallel: the closest pair may be at any endpoint.
+    return std::min({closest, pointSegmentDistanceSquared(p0, q0, q1), pointSegmentDistanceSquared(p1, q0, q1),
+                     pointSegmentDistanceSquared(q0, p0, p1), pointSegmentDistanceSquared(q1, p0, p1)});
+}
+
+CcdResult pointTriangleCcd(const Vec3& p0, const Vec3& a0, const Vec3& b0, const Vec3& c0, const Vec3& p1,
+                           const Vec3& a1, const Vec3& b1, const Vec3& c1, double eta, double gapFraction)
+{
+    return additiveCcd({p0, a0, b0, c0}, {p1 - p0, a1 - a0, b1 - b0, c1 - c0}, 1, eta, gapFraction,
+                       [](const std::array<Vec3, 4>& x) {
+                           return std::sqrt(pointTriangleDistanceSquared(x[0], x[1], x[2], x[3]));
+                       });
+}
+
+CcdResult edgeEdgeCcd(const Vec3& p0, const Vec3& q0, const Vec3& r0, const Vec3& s0, const Vec3& p1,
+                      const Vec3& q1, const Vec3& r1, const Vec3& s1, double eta, double gapFraction)
+{
+    return additiveCcd({p0, q0, r0, s0}, {p1 - p0, q1 - q0, r1 - r0, s1 - s0}, 2, eta, gapFraction,
+                       [](const std::array<Vec3, 4>& x) {
+                           return std::sqrt(segmentSegmentDistanceSquared(x[0], x[1], x[2], x[3]));
+                       });
+}
+
+SafeStepStats limitStepToCollisionFree(Mesh& mesh, const std::vector<Vec3>& start, const SafeStepOptions& options)
+{
+    SafeStepStats stats;
+    const std::size_t n = mesh.n_vertices();
+    if (n == 0 || start.size() < n) return stats;
+    const double eta = options.minSeparation;
+    // Buffers kept for the next step (no allocation once they have grown).
+    struct Scratch {
+        std::vector<Vec3> end;
+        std::vector<char> moves, changed;
+        std::vector<std::array<int, 3>> faces;
+        std::vector<std::array<int, 2>> edges;
+        std::vector<Box6> faceBox, edgeBox;
+        std::vector<double> reach, alpha, factor;
+        std::vector<int> touched;
+        std::vector<std::array<int, 3>> candidates;
+        detail::PackedBoxGrid grid;
+    };
+    static thread_local Scratch scratch;
+    std::vector<Vec3>& end = scratch.end;
+    std::vector<char>& moves = scratch.moves;
+    end.resize(n);
+    moves.assign(n, 0);
+    bool any = false;
+    for (auto v : mesh.vertices()) {
+        const std::size_t i = std::size_t(v.idx());
+        end[i] = position(mesh, v);
+        moves[i] = end[i] != start[i];
+        any = any || moves[i];
+    }
+    if (!any) return stats;
+
+    std::vector<std::array<int, 3>>& faces = scratch.faces;
+    faces.clear();
+    for (auto f : mesh.faces()) {
+        const HalfedgeHandle h = mesh.halfedge_handle(f);
+        faces.push_back({mesh.from_vertex_handle(h).idx(), mesh.to_vertex_handle(h).idx(),
+                         mesh.to_vertex_handle(mesh.next_halfedge_handle(h)).idx()});
+    }
+    std::vector<std::array<int, 2>>& edges = scratch.edges;
+    edges.clear();
+    for (auto e : mesh.edges()) {
+        const HalfedgeHandle h = mesh.halfedge_handle(e, 0);
+        edges.push_back({mesh.from_vertex_handle(h).idx(), mesh.to_vertex_handle(h).idx()});
+    }
+    auto sweep = [&](Box6& b, int v) {
+        const Vec3& s = start[std::size_t(v)];
+        const Vec3& e = end[std::size_t(v)];
+        for (int k = 0; k < 3; ++k) {
+            b[k] = std::min({b[k], s[k], e[k]});
+            b[k + 3] = std::max({b[k + 3], s[k], e[k]});
+        }
+    };
+    constexpr double inf = std::numeric_limits<double>::infinity();
+    auto grow = [](Box6& b, double r) {
+        for (int k = 0; k < 3; ++k) b[k] -= r, b[k + 3] += r;
+    };
+    std::vector<Box6>& faceBox = scratch.faceBox;
+    faceBox.resize(faces.size());
+    double extent = 0;
+    for (std::size_t f = 0; f < faces.size(); ++f) {
+        Box6 b = {inf, inf, inf, -inf, -inf, -inf};
+        for (int v : faces[f]) sweep(b, v);
+        grow(b, eta);
+        faceBox[f] = b;
+        extent += std::max({b[3] - b[0], b[4] - b[1], b[5] - b[2]});
+    }
+    if (faces.empty()) return stats;
+    const double cell = std::max(extent / double(faces.size()), 1e-9);
+
+    struct Candidate {
+        int kind; ///< 0: vertex a against face b; 1: edge a against edge b
+        int a, b;
+    };
+    // A pair whose distance at the start exceeds eta by more than the longest motions of both
+    // primitives together cannot come within eta however its vertices' motions are shortened:
+    // it is never stored (most pairs, since most vertices barely move).
+    std::vector<double>& reach = scratch.reach;
+    reach.assign(n, 0.0);
+    for (auto v : mesh.vertices()) {
+        const std::size_t i = std::size_t(v.idx());
+        if (moves[i]) reach[i] = (end[i] - start[i]).norm();
+    }
+    auto outOfReach = [&](double distanceSquared, double motion) {
+        const double r = motion + eta;
+        return distanceSquared > r * r * 1.0000001;
+    };
+    std::vector<std::array<int, 3>>& candidates = scratch.candidates; // (kind, a, b), see Candidate
+    candidates.clear();
+    detail::PackedBoxGrid& grid = scratch.grid;
+    grid.build(faceBox, cell);
+    for (auto v : mesh.vertices()) {
+        const int i = v.idx();
+        Box6 b = {inf, inf, inf, -inf, -inf, -inf};
+        sweep(b, i);
+        grid.query(b, [&](int f) {
+            const auto& t = faces[std::size_t(f)];
+            if (t[0] == i || t[1] == i || t[2] == i) return;
+            const double motion = reach[std::size_t(i)] + std::max({reach[std::size_t(t[0])], reach[std::size_t(t[1])],
+                                                                     reach[std::size_t(t[2])]});
+            if (motion == 0) return;
+            // A cheap lower bound first: the distance to the centroid less the farthest corner's.
+            const Vec3& p = start[std::size_t(i)];
+            const Vec3& a = start[std::size_t(t[0])];
+            const Vec3& b = start[std::size_t(t[1])];
+            const Vec3& c = start[std::size_t(t[2])];
+            const Vec3 centroid = (a + b + c) / 3.0;
+            const double radius = std::sqrt(std::max({(a - centroid).squaredNorm(), (b - centroid).squaredNorm(),
+                                                      (c - centroid).squaredNorm()}));
+            if ((p - centroid).norm() - radius > (motion + eta) * 1.0000001) return;
+            if (outOfReach(pointTriangleDistanceSquared(start[std::size_t(i)], start[std::size_t(t[0])],
+                                                        start[std::size_t(t[1])], start[std::size_t(t[2])]),
+                           motion))
+                return;
+            candidates.push_back({0, i, f});
+        });
+    }
+    std::vector<Box6>& edgeBox = scratch.edgeBox;
+    edgeBox.resize(edges.size());
+    for (std::size_t e = 0; e < edges.size(); ++e) {
+        Box6 b = {inf, inf, inf, -inf, -inf, -inf};
+        sweep(b, edges[e][0]);
+        sweep(b, edges[e][1]);
+        grow(b, 0.5 * eta);
+        edgeBox[e] = b;
+    }
+    grid.build(edgeBox, cell);
+    for (std::size_t e = 0; e < edges.size(); ++e) {
+        const auto& x = edges[e];
+        grid.query(edgeBox[e], [&](int g) {
+            if (std::size_t(g) <= e) return;
+            const auto& y = edges[std::size_t(g)];
+            if (x[0] == y[0] || x[0] == y[1] || x[1] == y[0] || x[1] == y[1]) return;
+            const double motion = std::max(reach[std::size_t(x[0])], reach[std::size_t(x[1])]) +
+                                  std::max(reach[std::size_t(y[0])], reach[std::size_t(y[1])]);
+            if (motion == 0) return;
+            // A cheap lower bound first: the midpoints' distance less the half lengths.
+            const Vec3& a0 = start[std::size_t(x[0])];
+            const Vec3& a1 = start[std::size_t(x[1])];
+            const Vec3& b0 = start[std::size_t(y[0])];
+            const Vec3& b1 = start[std::size_t(y[1])];
+            const double bound = 0.5 * ((a0 + a1 - b0 - b1).norm() - (a1 - a0).norm() - (b1 - b0).norm());
+            if (bound > (motion + eta) * 1.0000001) return;
+            if (outOfReach(segmentSegmentDistanceSquared(start[std::size_t(x[0])], start[std::size_t(x[1])],
+                                                         start[std::size_t(y[0])], start[std::size_t(y[1])]),
+                           motion))
+                return;
+            candidates.push_back({1, int(e), g});
+        });
+    }
+    stats.candidates = candidates.size();
+
+    // Rounds: test (again) the pairs with a vertex whose motion changed, shorten the colliding ones.
+    std::vector<double>& alpha = scratch.alpha;
+    std::vector<double>& factor = scratch.factor;
+    std::vector<char>& changed = scratch.changed;
+    std::vector<int>& touched = scratch.touched;
+    alpha.assign(n, 1.0);
+    factor.assign(n, 1.0);
+    changed.assign(n, 1);
+    touched.clear();
+    auto at = [&](int v) -> Vec3 {
+        const std::size_t i = std::size_t(v);
+        return alpha[i] == 1.0 ? end[i] : Vec3(start[i] + alpha[i] * (end[i] - start[i]));
+    };
+    for (int round = 0;; ++round) {
+        stats.rounds = round + 1;
+        bool hit = false;
+        const double shorten = round < options.shortenRounds ? options.shorten : 0.0;
+        for (const auto& entry : candidates) {
+            const Candidate c{entry[0], entry[1], entry[2]};
+            std::array<int, 4> v;
+            if (c.kind == 0) {
+                const auto& t = faces[std::size_t(c.b)];
+                v = {c.a, t[0], t[1], t[2]};
+            } else {
+                const auto& x = edges[std::size_t(c.a)];
+                const auto& y = edges[std::size_t(c.b)];
+                v = {x[0], x[1], y[0], y[1]};
+            }
+            if (!changed[std::size_t(v[0])] && !changed[std::size_t(v[1])] && !changed[std::size_t(v[2])] &&
+                !changed[std::size_t(v[3])])
+                continue;
+            const Vec3& s0 = start[std::size_t(v[0])];
+            const Vec3& s1 = start[std::size_t(v[1])];
+            const Vec3& s2 = start[std::size_t(v[2])];
+            const Vec3& s3 = start[std::size_t(v[3])];
+            const CcdResult r =
+                c.kind == 0 ? pointTriangleCcd(s0, s1, s2, s3, at(v[0]), at(v[1]), at(v[2]), at(v[3]), eta, options.gapFraction)
+                            : edgeEdgeCcd(s0, s1, s2, s3, at(v[0]), at(v[1]), at(v[2]), at(v[3]), eta, options.gapFraction);
+            if (!r.collides) continue;
+            hit = true;
+            ++stats.collisions;
+            for (int w : v) {
+                double& f = factor[std::size_t(w)];
+                if (alpha[std::size_t(w)] > 0 && moves[std::size_t(w)]) {
+                    if (f == 1.0) touched.push_back(w);
+                    f = std::min(f, shorten * r.toi);
+                }
+            }
+        }
+        std::fill(changed.begin(), changed.end(), 0);
+        if (!hit) break;
+        for (int w : touched) {
+            alpha[std::size_t(w)] *= factor[std::size_t(w)];
+            factor[std::size_t(w)] = 1.0;
+            changed[std::size_t(w)] = 1;
+        }
+        touched.clear();
+    }
+
+    OpenMesh::VPropHandleT<OpenMesh::Vec3d> velocity;
+    const bool hasVelocity = mesh.get_property_handle(velocity, kVelocityProperty);
+    for (auto v : mesh.vertices()) {
+        const std::size_t i = std::size_t(v.idx());
+        if (alpha[i] == 1.0) continue;
+        ++stats.shortened;
+        stats.stopped += alpha[i] == 0.0;
+        mesh.set_point(v, toPoint(at(v.idx())));
+        if (hasVelocity) mesh.property(velocity, v) *= alpha[i];
+    }
+    return stats;
+}
+
+bool facesMeetMesh(const Mesh& mesh, const std::vector<FaceHandle>& faces)
+{
+    struct Face {
+        std::array<int, 3> ids;
+        detail::TriangleRef ref;
+        Box6 box;
+    };
+    auto makeFace = [&](FaceHandle f) {
+        Face x;
+        const HalfedgeHandle h = mesh.halfedge_handle(f);
+        x.ids = {mesh.from_vertex_handle(h).idx(), mesh.to_vertex_handle(h).idx(),
+                 mesh.to_vertex_handle(mesh.next_halfedge_handle(h)).idx()};
+        const double* p[3];
+        for (int i = 0; i < 3; ++i) p[i] = mesh.point(VertexHandle(x.ids[std::size_t(i)])).data();
+        x.ref = detail::makeTriangle(p[0], p[1], p[2]);
+        for (int k = 0; k < 3; ++k) {
+            x.box[k] = std::min({p[0][k], p[1][k], p[2][k]});
+            x.box[k + 3] = std::max({p[0][k], p[1][k], p[2][k]});
+        }
+        return x;
+    };
+    std::vector<Face> mine;
+    constexpr double inf = std::numeric_limits<double>::infinity();
+    Box6 all = {inf, inf, inf, -inf, -inf, -inf};
+    for (FaceHandle f : faces) {
+        if (!f.is_valid() || mesh.status(f).deleted()) continue;
+        mine.push_back(makeFace(f));
+        if (mine.back().ref.axis < 0) return true; // a flat face: refuse
+        for (int k = 0; k < 3; ++k) {
+            all[k] = std::min(all[k], mine.back().box[k]);
+            all[k + 3] = std::max(all[k + 3], mine.back().box[k + 3]);
+        }
+    }
+    auto meet = [](const Face& x, const Face& y) {
+        return detail::boxesOverlap(x.box, y.box) &&
+               detail::classifyTriangles(x.ids, x.ref, y.ids, y.ref) != detail::TriangleContact::None;
+    };
+    for (std::size_t i = 0; i < mine.size(); ++i)
+        for (std::size_t j = i + 1; j < mine.size(); ++j)
+            if (meet(mine[i], mine[j])) return true;
+    for (auto f : mesh.faces()) {
+        if (std::find(faces.begin(), faces.end(), f) != faces.end()) continue;
+        const Face x = makeFace(f);
+        if (x.ref.axis < 0 || !detail::boxesOverlap(x.box, all)) continue;
+        for (const Face& y : mine)
+            if (meet(x, y)) return true;
+    }
+    return false;
+}
+
+double minimumSeparation(const Mesh& mesh, double radius)
+{
+    std::vector<Vec3> start(mesh.n_vertices());
+    for (auto v : mesh.vertices()) start[std::size_t(v.idx())] = position(mesh, v);
+    double best = radius;
+    detail::BoxGrid grid;
+    std::vector<std::array<int, 3>> faces;
+    std::vector<std::array<int, 2>> edges;
+    for (auto f : mesh.faces()) {
+        const HalfedgeHandle h = mesh.halfedge_handle(f);
+        faces.push_back({mesh.from_vertex_handle(h).idx(), mesh.to_vertex_handle(h).idx(),
+                         mesh.to_vertex_handle(mesh.next_halfedge_handle(h)).idx()});
+    }
+    for (auto e : mesh.edges()) {
+        const HalfedgeHandle h = mesh.halfedge_handle(e, 0);
+        edges.push_back({mesh.from_vertex_handle(h).idx(), mesh.to_vertex_handle(h).idx()});
+    }
+    auto boxOf = [&](const int* v, int k) {
+        Box6 b = {1e300, 1e300, 1e300, -1e300, -1e300, -1e300};
+        for (int i = 0; i < k; ++i)
+            for (int c = 0; c < 3; ++c) {
+                b[c] = std::min(b[c], start[std::size_t(v[i])][c] - radius);
+                b[c + 3] = std::max(b[c + 3], start[std::size_t(v[i])][c] + radius);
+            }
+        return b;
+    };
+    grid.reset(4 * radius + 1e-9, 4 * faces.size() + 64);
+    for (std::size_t f = 0; f < faces.size(); ++f) grid.insert(int(f), boxOf(faces[f].data(), 3));
+    for (auto v : mesh.vertices()) {
+        const int i = v.idx();
+        Box6 b = boxOf(&i, 1);
+        grid.query(b, [&](int f) {
+            const auto& t = faces[std::size_t(f)];
+            if (t[0] == i || t[1] == i || t[2] == i) return;
+            best = std::min(best, std::sqrt(pointTriangleDistanceSquared(start[i], start[t[0]], start[t[1]], start[t[2]])));
+        });
+    }
+    grid.reset(4 * radius + 1e-9, 4 * edges.size() + 64);
+    for (std::size_t e = 0; e < edges.size(); ++e) grid.insert(int(e), boxOf(edges[e].data(), 2));
+    for (std::size_t e = 0; e < edges.size(); ++e) {
+        const auto& x = edges[e];
+        grid.query(boxOf(x.data(), 2), [&](int g) {
+            const auto& y = edges[std::size_t(g)];
+            if (x[0] == y[0] || x[0] == y[1] || x[1] == y[0] || x[1] == y[1]) return;
+            best = std::min(best, std::sqrt(segmentSegmentDistanceSquared(start[x[0]], start[x[1]], start[y[0]], start[y[1]])));
+        });
+    }
+    return best;
+}
+
+} // namespace riemesh

@@ -1,0 +1,116 @@
+#include "detail/intersection_guard.h"
+
+#include "detail/triangle_intersection.h"
+
+#include <algorithm>
+
+namespace riemesh::detail {
+
+Box6 IntersectionGuard::faceBox(FaceHandle f) const
+{
+    const HalfedgeHandle h = mMesh.halfedge_handle(f);
+    const Mesh::Point& a = mMesh.point(mMesh.from_vertex_handle(h));
+    const Mesh::Point& b = mMesh.point(mMesh.to_vertex_handle(h));
+    const Mesh::Point& c = mMesh.point(mMesh.to_vertex_handle(mMesh.next_halfedge_handle(h)));
+    Box6 box;
+    for (int k = 0; k < 3; ++k) {
+        box[k] = std::min({a[k], b[k], c[k]});
+        box[k + 3] = std::max({a[k], b[k], c[k]});
+    }
+    return box;
+}
+
+void IntersectionGuard::build()
+{
+    mBuilt = true;
+    double extent = 0;
+    std::size_t count = 0;
+    for (auto f : mMesh.faces()) {
+        const Box6 b = faceBox(f);
+        extent += std::max({b[3] - b[0], b[4] - b[1], b[5] - b[2]});
+        ++count;
+    }
+    mGrid.reset(count ? std::max(extent / double(count), 1e-9) : 1.0, 4 * count + 64);
+    for (auto f : mMesh.faces()) mGrid.insert(f.idx(), faceBox(f));
+}
+
+void IntersectionGuard::update(VertexHandle v)
+{
+    if (!mBuilt) return; // built from the current mesh when first needed
+    for (auto f = mMesh.cvf_begin(v); f.is_valid(); ++f) mGrid.insert(f->idx(), faceBox(*f));
+}
+
+bool IntersectionGuard::crosses(const std::vector<Triangle>& made, const std::array<int, 2>& gone,
+                                const std::array<int, 2>& goneFaces)
+{
+    if (!mBuilt) build();
+    std::vector<TriangleRef> refs;
+    refs.reserve(made.size());
+    for (const Triangle& t : made) {
+        refs.push_back(makeTriangle(t.p[0].data(), t.p[1].data(), t.p[2].data()));
+        if (refs.back().axis < 0) return true; // a flat triangle: refuse
+    }
+    for (std::size_t i = 0; i < made.size(); ++i)
+        for (std::size_t j = i + 1; j < made.size(); ++j)
+            if (classifyTriangles(made[i].ids, refs[i], made[j].ids, refs[j]) != TriangleContact::None) return true;
+    for (std::size_t i = 0; i < made.size(); ++i) {
+        const Triangle& t = made[i];
+        Box6 box;
+        for (int k = 0; k < 3; ++k) {
+            box[k] = std::min({t.p[0][k], t.p[1][k], t.p[2][k]});
+            box[k + 3] = std::max({t.p[0][k], t.p[1][k], t.p[2][k]});
+        }
+        bool hit = false;
+        mGrid.query(box, [&](int fi) {
+            if (hit || fi == goneFaces[0] || fi == goneFaces[1]) return;
+            const FaceHandle f(fi);
+            if (mMesh.status(f).deleted()) return;
+            const HalfedgeHandle h = mMesh.halfedge_handle(f);
+            const std::array<int, 3> ids = {mMesh.from_vertex_handle(h).idx(), mMesh.to_vertex_handle(h).idx(),
+                                            mMesh.to_vertex_handle(mMesh.next_halfedge_handle(h)).idx()};
+            for (int x : ids)
+                if (x == gone[0] || x == gone[1]) return;
+            const TriangleRef ref = makeTriangle(mMesh.point(VertexHandle(ids[0])).data(),
+                                                 mMesh.point(VertexHandle(ids[1])).data(),
+                                                 mMesh.point(VertexHandle(ids[2])).data());
+            if (ref.axis < 0) return; // a degenerate face: nothing to cross
+            if (classifyTriangles(t.ids, refs[i], ids, ref) != TriangleContact::None) hit = true;
+        });
+        if (hit) return true;
+    }
+    return false;
+}
+
+bool IntersectionGuard::isCollapseSafe(HalfedgeHandle h, const Vec3& target)
+{
+    const VertexHandle u = mMesh.from_vertex_handle(h), v = mMesh.to_vertex_handle(h);
+    const FaceHandle left = mMesh.face_handle(h), right = mMesh.face_handle(mMesh.opposite_halfedge_handle(h));
+    mMade.clear();
+    for (const VertexHandle x : {u, v})
+        for (auto f = mMesh.cvf_begin(x); f.is_valid(); ++f) {
+            if (*f == left || *f == right) continue;
+            Triangle t;
+            int k = 0;
+            for (auto w = mMesh.cfv_begin(*f); w.is_valid(); ++w, ++k) {
+                const bool moved = *w == u || *w == v;
+                t.ids[std::size_t(k)] = moved ? v.idx() : w->idx();
+                t.p[std::size_t(k)] = moved ? target : position(mMesh, *w);
+            }
+            mMade.push_back(t);
+        }
+    return !crosses(mMade, {u.idx(), v.idx()}, {-1, -1});
+}
+
+bool IntersectionGuard::isFlipSafe(EdgeHandle e)
+{
+    const HalfedgeHandle h = mMesh.halfedge_handle(e, 0), o = mMesh.halfedge_handle(e, 1);
+    const VertexHandle u = mMesh.from_vertex_handle(h), v = mMesh.to_vertex_handle(h);
+    const VertexHandle a = mMesh.to_vertex_handle(mMesh.next_halfedge_handle(h));
+    const VertexHandle b = mMesh.to_vertex_handle(mMesh.next_halfedge_handle(o));
+    mMade.clear();
+    mMade.push_back({{u.idx(), b.idx(), a.idx()}, {position(mMesh, u), position(mMesh, b), position(mMesh, a)}});
+    mMade.push_back({{v.idx(), a.idx(), b.idx()}, {position(mMesh, v), position(mMesh, a), position(mMesh, b)}});
+    return !crosses(mMade, {-1, -1}, {mMesh.face_handle(h).idx(), mMesh.face_handle(o).idx()});
+}
+
+} // namespace riemesh::detail

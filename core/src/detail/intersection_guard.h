@@ -1,0 +1,47 @@
+// detail/intersection_guard.h: "does this edit make faces cross?" for the regularity step's
+// collapses and flips (issue 17). A hashed grid of the faces' boxes (built at the first question,
+// kept up to date by update() after every edit) gives the faces near the triangles an edit would
+// make; exact triangle-triangle tests (detail/triangle_intersection.h, shared vertices classified
+// as in findSelfIntersections) decide. Private to core/src.
+#pragma once
+
+#include "riemesh/mesh.h"
+
+#include "detail/box_grid.h"
+
+#include <array>
+#include <vector>
+
+namespace riemesh::detail {
+
+class IntersectionGuard {
+public:
+    explicit IntersectionGuard(const Mesh& mesh) : mMesh(mesh) {}
+
+    /// Collapsing h (its from-vertex into its to-vertex, moved to `target`, world units) leaves
+    /// no two faces crossing (given none crossed before).
+    bool isCollapseSafe(HalfedgeHandle h, const Vec3& target);
+    /// Flipping e leaves no two faces crossing.
+    bool isFlipSafe(EdgeHandle e);
+    /// After an edit that changed the faces around v (a split, a collapse kept v, a flip made v a
+    /// corner of both new faces): enters them with their new boxes.
+    void update(VertexHandle v);
+
+private:
+    struct Triangle {
+        std::array<int, 3> ids;
+        std::array<Vec3, 3> p;
+    };
+    void build();
+    /// One of `made` (the edit's new triangles) meets another or a live face of the mesh that
+    /// has none of the `gone` vertices and is not one of the `goneFaces`.
+    bool crosses(const std::vector<Triangle>& made, const std::array<int, 2>& gone, const std::array<int, 2>& goneFaces);
+    Box6 faceBox(FaceHandle f) const;
+
+    const Mesh& mMesh;
+    BoxGrid mGrid;
+    bool mBuilt = false;
+    std::vector<Triangle> mMade; // scratch
+};
+
+} // namespace riemesh::detail

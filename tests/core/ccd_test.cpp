@@ -1,0 +1,168 @@
+// Intersection-free motion (issue 17): the CCD predicates, the collision-safe step, and the
+// evolution keeping two surfaces driven into each other apart.
+#include "mesh_invariants.h"
+#include "riemesh/ccd.h"
+#include "riemesh/evolution.h"
+#include "riemesh/primitives.h"
+#include "riemesh/regularity.h"
+#include "riemesh/self_intersection.h"
+
+#include <doctest/doctest.h>
+
+#include <cmath>
+
+using namespace riemesh;
+
+namespace {
+
+const Vec3 kA(0, 0, 0), kB(1, 0, 0), kC(0, 1, 0); // a triangle in z = 0
+
+} // namespace
+
+TEST_CASE("ccd: distances from a point to a triangle and between segments, degenerate cases included")
+{
+    CHECK(pointTriangleDistanceSquared(Vec3(0.2, 0.2, 0.5), kA, kB, kC) == doctest::Approx(0.25));
+    CHECK(pointTriangleDistanceSquared(Vec3(-1, 0, 0), kA, kB, kC) == doctest::Approx(1.0));
+    CHECK(pointTriangleDistanceSquared(Vec3(1, 1, 0), kA, kB, kC) == doctest::Approx(0.5));
+    // A flat triangle (collinear corners): the distance to its segment.
+    CHECK(pointTriangleDistanceSquared(Vec3(0.5, 1, 0), kA, kB, Vec3(2, 0, 0)) == doctest::Approx(1.0));
+    // Crossing, skew, parallel (overlapping and apart) and point-like segments.
+    CHECK(segmentSegmentDistanceSquared(Vec3(-1, 0, 0), Vec3(1, 0, 0), Vec3(0, -1, 0), Vec3(0, 1, 0)) == doctest::Approx(0.0));
+    CHECK(segmentSegmentDistanceSquared(Vec3(-1, 0, 0), Vec3(1, 0, 0), Vec3(0, -1, 2), Vec3(0, 1, 2)) == doctest::Approx(4.0));
+    CHECK(segmentSegmentDistanceSquared(Vec3(0, 0, 0), Vec3(1, 0, 0), Vec3(0.5, 1, 0), Vec3(2, 1, 0)) == doctest::Approx(1.0));
+    CHECK(segmentSegmentDistanceSquared(Vec3(0, 0, 0), Vec3(1, 0, 0), Vec3(3, 0, 0), Vec3(4, 0, 0)) == doctest::Approx(4.0));
+    CHECK(segmentSegmentDistanceSquared(Vec3(0, 0, 0), Vec3(0, 0, 0), Vec3(3, 0, 0), Vec3(3, 0, 0)) == doctest::Approx(9.0));
+}
+
+TEST_CASE("ccd: a point passing through a triangle in one step collides, one passing beside it does not")
+{
+    const double eta = 1e-3;
+    // Straight through the interior, from 1 above to 1 below.
+    const CcdResult through = pointTriangleCcd(Vec3(0.25, 0.25, 1), kA, kB, kC, Vec3(0.25, 0.25, -1), kA, kB, kC, eta);
+    CHECK(through.collides);
+    CHECK(through.toi < 0.5); // still above the plane at the reported time
+    CHECK(through.toi >= 0.0);
+    // Beside it (x + y > 1 all along): no collision.
+    CHECK_FALSE(pointTriangleCcd(Vec3(1, 1, 1), kA, kB, kC, Vec3(1, 1, -1), kA, kB, kC, eta).collides);
+    // The triangle moves through a resting point.
+    CHECK(pointTriangleCcd(Vec3(0.2, 0.2, 0), kA + Vec3(0, 0, 1), kB + Vec3(0, 0, 1), kC + Vec3(0, 0, 1), Vec3(0.2, 0.2, 0),
+                           kA - Vec3(0, 0, 1), kB - Vec3(0, 0, 1), kC - Vec3(0, 0, 1), eta)
+              .collides);
+    // Sliding parallel to the triangle at a distance: no collision; moving together: none either.
+    CHECK_FALSE(pointTriangleCcd(Vec3(0.1, 0.1, 0.5), kA, kB, kC, Vec3(0.6, 0.1, 0.5), kA, kB, kC, eta).collides);
+    const Vec3 shift(3, -2, 5);
+    CHECK_FALSE(pointTriangleCcd(Vec3(0.2, 0.2, 0.01), kA, kB, kC, Vec3(0.2, 0.2, 0.01) + shift, kA + shift, kB + shift,
+                                 kC + shift, eta)
+                    .collides);
+    // Ending just short of the plane, closer than eta: a collision.
+    CHECK(pointTriangleCcd(Vec3(0.2, 0.2, 1), kA, kB, kC, Vec3(0.2, 0.2, 0.5 * eta), kA, kB, kC, eta).collides);
+    // A flat (degenerate) triangle is its segments: a point crossing it still collides.
+    CHECK(pointTriangleCcd(Vec3(0.5, 0, 1), kA, kB, Vec3(2, 0, 0), Vec3(0.5, 0, -1), kA, kB, Vec3(2, 0, 0), eta).collides);
+}
+
+TEST_CASE("ccd: edges crossing in one step collide; parallel and separating ones do not")
+{
+    const double eta = 1e-3;
+    // Edge along x at z = 1 moving to z = -1 through an edge along y at z = 0.
+    CHECK(edgeEdgeCcd(Vec3(-1, 0, 1), Vec3(1, 0, 1), Vec3(0, -1, 0), Vec3(0, 1, 0), Vec3(-1, 0, -1), Vec3(1, 0, -1),
+                      Vec3(0, -1, 0), Vec3(0, 1, 0), eta)
+              .collides);
+    // The same motion beside the other edge's end (x in [2, 4]): no collision.
+    CHECK_FALSE(edgeEdgeCcd(Vec3(2, 0, 1), Vec3(4, 0, 1), Vec3(0, -1, 0), Vec3(0, 1, 0), Vec3(2, 0, -1), Vec3(4, 0, -1),
+                            Vec3(0, -1, 0), Vec3(0, 1, 0), eta)
+                    .collides);
+    // Parallel edges sliding along each other at distance 0.5: none; moving onto each other: one.
+    CHECK_FALSE(edgeEdgeCcd(Vec3(0, 0, 0), Vec3(1, 0, 0), Vec3(0, 0.5, 0), Vec3(1, 0.5, 0), Vec3(0.7, 0, 0), Vec3(1.7, 0, 0),
+                            Vec3(0, 0.5, 0), Vec3(1, 0.5, 0), eta)
+                    .collides);
+    CHECK(edgeEdgeCcd(Vec3(0, 0, 0), Vec3(1, 0, 0), Vec3(0, 0.5, 0), Vec3(1, 0.5, 0), Vec3(0, 1, 0), Vec3(1, 1, 0),
+                      Vec3(0, 0.5, 0), Vec3(1, 0.5, 0), eta)
+              .collides);
+    // Moving apart: none. No motion at all: none.
+    CHECK_FALSE(edgeEdgeCcd(Vec3(-1, 0, 0.1), Vec3(1, 0, 0.1), Vec3(0, -1, 0), Vec3(0, 1, 0), Vec3(-1, 0, 1), Vec3(1, 0, 1),
+                            Vec3(0, -1, 0), Vec3(0, 1, 0), eta)
+                    .collides);
+    CHECK_FALSE(edgeEdgeCcd(Vec3(-1, 0, 0.1), Vec3(1, 0, 0.1), Vec3(0, -1, 0), Vec3(0, 1, 0), Vec3(-1, 0, 0.1),
+                            Vec3(1, 0, 0.1), Vec3(0, -1, 0), Vec3(0, 1, 0), eta)
+                    .collides);
+    // A degenerate (zero-length) edge is a point: crossing the other edge still collides.
+    CHECK(edgeEdgeCcd(Vec3(0, 0, 1), Vec3(0, 0, 1), Vec3(0, -1, 0), Vec3(0, 1, 0), Vec3(0, 0, -1), Vec3(0, 0, -1),
+                      Vec3(0, -1, 0), Vec3(0, 1, 0), eta)
+              .collides);
+}
+
+TEST_CASE("ccd: a sphere driven into another in one big step stops before the faces cross")
+{
+    // Two unit spheres 0.05 apart (edges ~0.3); the second jumps half an edge to the left in one
+    // step (the model's largest step, vmax, is at most an edge): 0.1 deep into the first.
+    Mesh mesh = makeIcosphere(Vec3(0, 0, 0), 1.0, 3);
+    const Mesh other = makeIcosphere(Vec3(2.05, 0, 0), 1.0, 3);
+    appendMesh(mesh, other);
+    REQUIRE(findSelfIntersections(mesh).count() == 0);
+    std::vector<Vec3> start(mesh.n_vertices());
+    for (auto v : mesh.vertices()) start[std::size_t(v.idx())] = position(mesh, v);
+    const std::size_t firstMoved = mesh.n_vertices() - other.n_vertices();
+    for (auto v : mesh.vertices())
+        if (std::size_t(v.idx()) >= firstMoved) mesh.set_point(v, mesh.point(v) + Mesh::Point(-0.15, 0, 0));
+    CHECK(findSelfIntersections(mesh).count() > 0); // unchecked, the step makes them cross
+
+    SafeStepOptions so;
+    so.minSeparation = 1e-3;
+    const SafeStepStats stats = limitStepToCollisionFree(mesh, start, so);
+    CHECK(stats.collisions > 0);
+    CHECK(stats.shortened > 0);
+    CHECK(findSelfIntersections(mesh).count() == 0);
+    CHECK(minimumSeparation(mesh, 0.01) >= so.minSeparation); // never closer than eta
+    // The far side moved the whole step; the near side was held back, still to the right of the
+    // first sphere.
+    double leftmost = 1e9, rightmost = -1e9;
+    for (auto v : mesh.vertices())
+        if (std::size_t(v.idx()) >= firstMoved) {
+            leftmost = std::min(leftmost, mesh.point(v)[0]);
+            rightmost = std::max(rightmost, mesh.point(v)[0]);
+        }
+    CHECK(rightmost == doctest::Approx(2.9));
+    CHECK(leftmost > 1.0);
+    MESSAGE(stats.candidates << " candidates, " << stats.collisions << " collisions, " << stats.shortened
+                             << " vertices shortened (" << stats.stopped << " stopped), " << stats.rounds << " rounds");
+    REQUIRE_MESH_OK(mesh);
+}
+
+TEST_CASE("ccd: a step with no vertex near another surface is left alone")
+{
+    Mesh mesh = makeIcosphere(Vec3(0, 0, 0), 1.0, 2);
+    appendMesh(mesh, makeIcosphere(Vec3(5, 0, 0), 1.0, 2));
+    std::vector<Vec3> start(mesh.n_vertices());
+    for (auto v : mesh.vertices()) start[std::size_t(v.idx())] = position(mesh, v);
+    for (auto v : mesh.vertices()) mesh.set_point(v, mesh.point(v) * 1.1); // every vertex moves out
+    const Mesh expected = mesh;
+    const SafeStepStats stats = limitStepToCollisionFree(mesh, start);
+    CHECK(stats.collisions == 0);
+    CHECK(stats.shortened == 0);
+    for (auto v : mesh.vertices()) CHECK(mesh.point(v) == expected.point(v));
+}
+
+TEST_CASE("ccd: two bubbles inflating into each other at vmax = delta never cross, and still merge")
+{
+    // Inside one ball, two bubbles grow toward each other at the largest step the model allows:
+    // no iteration may leave crossing faces, and the model's merge (paper 3.2) still joins them.
+    const Box3 bounds(Vec3::Constant(-12), Vec3::Constant(12));
+    FunctionImage image([](const Vec3& x) { return 0.5 + 0.5 * std::tanh(9.0 - x.norm()); }, bounds, 1.0);
+    EuclideanMetric metric;
+    Mesh mesh = makeBubbles({{Vec3(-4, 0, 0), 2.0}, {Vec3(4, 0, 0), 2.0}}, 1.5);
+    EvolutionOptions o;
+    o.intersectionFree = true;
+    o.delta = 1.0;
+    o.vmaxFraction = 1.0;
+    o.maxIterations = 400;
+    int crossed = 0;
+    o.progress = [&](const IterationStats&) {
+        crossed += int(findSelfIntersections(mesh).count() > 0);
+        return true;
+    };
+    const EvolutionStats stats = evolve(mesh, image, metric, o);
+    CHECK(crossed == 0);
+    CHECK(stats.merges >= 1);
+    CHECK(topologyOf(mesh).components == 1);
+    REQUIRE_MESH_OK(mesh);
+}
