@@ -17,20 +17,9 @@ using namespace riemesh;
 
 namespace {
 
-/// A fog-like analytic image: 1 inside, 0 outside, a smooth (tanh) transition one voxel wide
-/// centred on the surface sdf = 0 (sdf > 0 inside). The isosurface I = 0.5 is exactly sdf = 0.
-FunctionImage fogImage(std::function<double(const Vec3&)> sdf, const Box3& bounds)
-{
-    return FunctionImage([sdf](const Vec3& x) { return 0.5 + 0.5 * std::tanh(sdf(x)); }, bounds, 1.0);
-}
-
-double ballSdf(const Vec3& x, const Vec3& c, double r) { return r - (x - c).norm(); }
-
-double torusSdf(const Vec3& x, double major, double minor)
-{
-    const double q = std::hypot(x.x(), x.y()) - major;
-    return minor - std::hypot(q, x.z());
-}
+using fixtures::ballSdf;
+using fixtures::fogImage;
+using fixtures::torusSdf;
 
 EvolutionOptions baseOptions(double delta)
 {

@@ -25,18 +25,9 @@ using namespace riemesh;
 
 namespace {
 
-FunctionImage fogImage(std::function<double(const Vec3&)> sdf, const Box3& bounds)
-{
-    return FunctionImage([sdf](const Vec3& x) { return 0.5 + 0.5 * std::tanh(sdf(x)); }, bounds, 1.0);
-}
-
-double ballSdf(const Vec3& x, const Vec3& c, double r) { return r - (x - c).norm(); }
-
-double torusSdf(const Vec3& x, double major, double minor)
-{
-    const double q = std::hypot(x.x(), x.y()) - major;
-    return minor - std::hypot(q, x.z());
-}
+using fixtures::ballSdf;
+using fixtures::fogImage;
+using fixtures::torusSdf;
 
 /// Restores the default thread count (all cores) when a test case ends, however it ends.
 struct ThreadCountGuard {

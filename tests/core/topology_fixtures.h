@@ -1,18 +1,37 @@
-// tests/core/topology_fixtures.h: procedural fixtures for the collision and topology suites
-// (regular spheres and tori, a dumbbell with a triangular-prism tube, turned-over copies, edge
+// tests/core/topology_fixtures.h: procedural fixtures for the collision, topology and evolution suites
+// (analytic fog images of balls and tori, regular spheres and tori, a dumbbell with a triangular-prism
+// tube, turned-over copies, edge
 // statistics).
 #pragma once
 
+#include "riemesh/image.h"
 #include "riemesh/mesh.h"
 #include "riemesh/primitives.h"
 
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <functional>
 #include <limits>
 #include <vector>
 
 namespace riemesh::fixtures {
+
+/// A fog-like analytic image: 1 inside, 0 outside, a smooth (tanh) transition one voxel wide
+/// centred on the surface sdf = 0 (sdf > 0 inside). The isosurface I = 0.5 is exactly sdf = 0.
+inline FunctionImage fogImage(std::function<double(const Vec3&)> sdf, const Box3& bounds)
+{
+    return FunctionImage([sdf](const Vec3& x) { return 0.5 + 0.5 * std::tanh(sdf(x)); }, bounds, 1.0);
+}
+
+inline double ballSdf(const Vec3& x, const Vec3& c, double r) { return r - (x - c).norm(); }
+
+inline double torusSdf(const Vec3& x, double major, double minor)
+{
+    const double q = std::hypot(x.x(), x.y()) - major;
+    return minor - std::hypot(q, x.z());
+}
+
 
 struct EdgeStats {
     double min = std::numeric_limits<double>::infinity();
