@@ -1,7 +1,6 @@
 // tests/core/topology_fixtures.h: procedural fixtures for the collision, topology and evolution suites
 // (analytic fog images of balls and tori, regular spheres and tori, a dumbbell with a triangular-prism
-// tube, turned-over copies, edge
-// statistics).
+// tube, turned-over copies, edge statistics).
 #pragma once
 
 #include "riemesh/image.h"
