@@ -3,6 +3,7 @@
 #include "riemesh/ccd.h"
 
 #include "detail/box_grid.h"
+#include "detail/parallel.h"
 #include "detail/triangle_intersection.h"
 
 #include <algorithm>
@@ -59,6 +60,26 @@ CcdResult additiveCcd(std::array<Vec3, 4> x, std::array<Vec3, 4> d, int split, d
         tl = 0.9 * (dist - xi) / lp;
     }
     return {true, t};
+}
+
+/// Queries per chunk of the broad phase (see findInChunks).
+constexpr std::size_t kQueryChunk = 512;
+
+/// Runs query(i, found) for i in [0, count) in parallel, in fixed chunks of kQueryChunk indices,
+/// each appending to its own list; the lists are then appended to `out` in chunk order, so that
+/// `out` is the same, in the same order, for any thread count.
+template <class Query>
+void findInChunks(std::size_t count, std::vector<std::vector<std::array<int, 3>>>& lists,
+                  std::vector<std::array<int, 3>>& out, Query&& query)
+{
+    const std::size_t chunks = (count + kQueryChunk - 1) / kQueryChunk;
+    if (lists.size() < chunks) lists.resize(chunks);
+    detail::parallelFor(0, chunks, 1, [&](std::size_t c) {
+        std::vector<std::array<int, 3>>& found = lists[c];
+        found.clear();
+        for (std::size_t i = c * kQueryChunk, e = std::min(count, i + kQueryChunk); i < e; ++i) query(i, found);
+    });
+    for (std::size_t c = 0; c < chunks; ++c) out.insert(out.end(), lists[c].begin(), lists[c].end());
 }
 
 } // namespace
@@ -164,6 +185,8 @@ SafeStepStats limitStepToCollisionFree(Mesh& mesh, const std::vector<Vec3>& star
         std::vector<double> reach, alpha, factor;
         std::vector<int> touched;
         std::vector<std::array<int, 3>> candidates;
+        std::vector<std::vector<std::array<int, 3>>> lists;
+        std::vector<int> live;
         detail::PackedBoxGrid grid;
     };
     static thread_local Scratch scratch;
@@ -227,8 +250,11 @@ SafeStepStats limitStepToCollisionFree(Mesh& mesh, const std::vector<Vec3>& star
     // it is never stored (most pairs, since most vertices barely move).
     std::vector<double>& reach = scratch.reach;
     reach.assign(n, 0.0);
+    std::vector<int>& live = scratch.live;
+    live.clear();
     for (auto v : mesh.vertices()) {
         const std::size_t i = std::size_t(v.idx());
+        live.push_back(v.idx());
         if (moves[i]) reach[i] = (end[i] - start[i]).norm();
     }
     auto outOfReach = [&](double distanceSquared, double motion) {
@@ -239,8 +265,8 @@ SafeStepStats limitStepToCollisionFree(Mesh& mesh, const std::vector<Vec3>& star
     candidates.clear();
     detail::PackedBoxGrid& grid = scratch.grid;
     grid.build(faceBox, cell);
-    for (auto v : mesh.vertices()) {
-        const int i = v.idx();
+    findInChunks(live.size(), scratch.lists, candidates, [&](std::size_t k, std::vector<std::array<int, 3>>& found) {
+        const int i = live[k];
         Box6 b = {inf, inf, inf, -inf, -inf, -inf};
         sweep(b, i);
         grid.query(b, [&](int f) {
@@ -258,13 +284,10 @@ SafeStepStats limitStepToCollisionFree(Mesh& mesh, const std::vector<Vec3>& star
             const double radius = std::sqrt(std::max({(a - centroid).squaredNorm(), (b - centroid).squaredNorm(),
                                                       (c - centroid).squaredNorm()}));
             if ((p - centroid).norm() - radius > (motion + eta) * 1.0000001) return;
-            if (outOfReach(pointTriangleDistanceSquared(start[std::size_t(i)], start[std::size_t(t[0])],
-                                                        start[std::size_t(t[1])], start[std::size_t(t[2])]),
-                           motion))
-                return;
-            candidates.push_back({0, i, f});
+            if (outOfReach(pointTriangleDistanceSquared(p, a, b, c), motion)) return;
+            found.push_back({0, i, f});
         });
-    }
+    });
     std::vector<Box6>& edgeBox = scratch.edgeBox;
     edgeBox.resize(edges.size());
     for (std::size_t e = 0; e < edges.size(); ++e) {
@@ -275,10 +298,9 @@ SafeStepStats limitStepToCollisionFree(Mesh& mesh, const std::vector<Vec3>& star
         edgeBox[e] = b;
     }
     grid.build(edgeBox, cell);
-    for (std::size_t e = 0; e < edges.size(); ++e) {
+    findInChunks(edges.size(), scratch.lists, candidates, [&](std::size_t e, std::vector<std::array<int, 3>>& found) {
         const auto& x = edges[e];
-        grid.query(edgeBox[e], [&](int g) {
-            if (std::size_t(g) <= e) return;
+        grid.query(edgeBox[e], [&](int g) { // each pair once: from its lower edge
             const auto& y = edges[std::size_t(g)];
             if (x[0] == y[0] || x[0] == y[1] || x[1] == y[0] || x[1] == y[1]) return;
             const double motion = std::max(reach[std::size_t(x[0])], reach[std::size_t(x[1])]) +
@@ -291,13 +313,10 @@ SafeStepStats limitStepToCollisionFree(Mesh& mesh, const std::vector<Vec3>& star
             const Vec3& b1 = start[std::size_t(y[1])];
             const double bound = 0.5 * ((a0 + a1 - b0 - b1).norm() - (a1 - a0).norm() - (b1 - b0).norm());
             if (bound > (motion + eta) * 1.0000001) return;
-            if (outOfReach(segmentSegmentDistanceSquared(start[std::size_t(x[0])], start[std::size_t(x[1])],
-                                                         start[std::size_t(y[0])], start[std::size_t(y[1])]),
-                           motion))
-                return;
-            candidates.push_back({1, int(e), g});
-        });
-    }
+            if (outOfReach(segmentSegmentDistanceSquared(a0, a1, b0, b1), motion)) return;
+            found.push_back({1, int(e), g});
+        }, int(e));
+    });
     stats.candidates = candidates.size();
 
     // Rounds: test (again) the pairs with a vertex whose motion changed, shorten the colliding ones.

@@ -13,6 +13,7 @@
 #include <array>
 #include <cmath>
 #include <cstdint>
+#include <cstring>
 #include <limits>
 #include <vector>
 
@@ -32,7 +33,7 @@ public:
     void reset(double cellSize, std::size_t entries)
     {
         mInvCell = 1.0 / cellSize;
-        std::size_t buckets = 64;
+        std::size_t buckets = 256;
         while (buckets < 2 * entries && buckets < (std::size_t(1) << 26)) buckets *= 2;
         mBits = 0;
         while ((std::size_t(1) << mBits) < buckets) ++mBits;
@@ -149,22 +150,37 @@ private:
     std::vector<int> mLarge; ///< items whose box spans too many cells: tested by every query
 };
 
-/// A BoxGrid built once from all its boxes, laid out for speed: the entries of a bucket are
-/// contiguous and carry their item's box (in floats rounded outward: 40 bytes an entry), so that a
-/// query reads memory in order (the collision-safe step queries it once per vertex and edge of the
-/// mesh, every iteration). Reports every item whose box overlaps the query, once (the float boxes
-/// are a little larger than the given ones: a few more reports, never fewer). Buffers are kept
-/// between builds.
+/// A BoxGrid built once from all its boxes, laid out for speed (the collision-safe step queries
+/// it once per vertex and edge of the mesh, every iteration): cells are numbered relative to the
+/// lowest one, and a cell's bucket is its column's hash plus its z, so that the cells of a query
+/// along z are consecutive buckets and their entries one run of memory, scanned without branches
+/// (an entry carries its key and its item's box, in floats rounded outward). Reports every item
+/// whose box overlaps the query, once (the float boxes are a little larger than the given ones: a
+/// few more reports, never fewer). Buffers are kept between builds.
 class PackedBoxGrid {
 public:
-    /// Items 0..boxes.size()-1 with those boxes; cells of side cellSize > 0 (world units).
+    /// Items 0..boxes.size()-1 with those boxes; cells of side cellSize > 0 (world units; larger
+    /// when the boxes span more than 2^20 such cells on an axis).
     void build(const std::vector<Box6>& boxes, double cellSize)
     {
-        mInvCell = 1.0 / cellSize;
         mLarge.clear();
         mTemp.clear();
+        mEntries.clear();
+        // The boxes' extent, in the given cells: the origin, and a cell no smaller than 2^-20 of it.
+        std::array<double, 6> all = {kHuge, kHuge, kHuge, -kHuge, -kHuge, -kHuge};
+        for (const Box6& b : boxes)
+            for (int k = 0; k < 3; ++k)
+                if (std::abs(b[k]) < kHuge && std::abs(b[k + 3]) < kHuge) {
+                    all[k] = std::min(all[k], b[k]);
+                    all[k + 3] = std::max(all[k + 3], b[k + 3]);
+                }
+        double cell = cellSize;
+        for (int k = 0; k < 3; ++k)
+            if (all[k] <= all[k + 3]) cell = std::max(cell, (all[k + 3] - all[k]) / double(1 << 20));
+        mInvCell = 1.0 / cell;
+        for (int k = 0; k < 3; ++k) mOrigin[k] = all[k] <= all[k + 3] ? std::floor(all[k] * mInvCell) : 0.0;
         for (std::size_t i = 0; i < boxes.size(); ++i) {
-            Entry e{0, std::int32_t(i), {}};
+            Entry e{0, std::int32_t(i), {}, 0};
             for (int k = 0; k < 3; ++k) {
                 e.box[k] = down(boxes[i][k]);
                 e.box[k + 3] = up(boxes[i][k + 3]);
@@ -178,17 +194,18 @@ public:
                 for (std::int64_t y = c[1]; y <= c[4]; ++y)
                     for (std::int64_t z = c[2]; z <= c[5]; ++z) {
                         e.key = pack(x, y, z);
+                        e.lowest = std::uint8_t((x == c[0] ? 1 : 0) | (y == c[1] ? 2 : 0) | (z == c[2] ? 4 : 0));
                         mTemp.push_back(e);
                     }
         }
-        std::size_t buckets = 64;
+        // At least 2 kMaxSpan buckets: a query's run of cells never meets itself after wrapping.
+        std::size_t buckets = 256;
         while (buckets < mTemp.size() && buckets < (std::size_t(1) << 26)) buckets *= 2;
-        mBits = 0;
-        while ((std::size_t(1) << mBits) < buckets) ++mBits;
+        mMask = buckets - 1;
         mStart.assign(buckets + 1, 0);
         mBucket.resize(mTemp.size());
         for (std::size_t t = 0; t < mTemp.size(); ++t) {
-            mBucket[t] = std::uint32_t(bucket(mTemp[t].key));
+            mBucket[t] = std::uint32_t(bucketOf(mTemp[t].key));
             ++mStart[mBucket[t] + 1];
         }
         for (std::size_t b = 0; b < buckets; ++b) mStart[b + 1] += mStart[b];
@@ -197,39 +214,64 @@ public:
         for (std::size_t t = 0; t < mTemp.size(); ++t) mEntries[mFill[mBucket[t]]++] = mTemp[t];
     }
 
-
-    /// Calls f(item) once for every item whose box overlaps `q`.
+    /// Calls f(item) once for every item above `after` whose box overlaps `q` (after = -1: all).
     template <class F>
-    void query(const Box6& q, F&& f) const
+    void query(const Box6& q, F&& f, int after = -1) const
     {
         for (const Entry& e : mLarge)
-            if (overlaps(q, e.box)) f(int(e.item));
+            if (e.item > after && overlaps(q, e.box)) f(int(e.item));
         std::array<std::int64_t, 6> c{};
         const std::array<float, 6> qf = {down(q[0]), down(q[1]), down(q[2]), up(q[3]), up(q[4]), up(q[5])};
         if (!cellRange(qf, c)) { // a query box too large for the cells: every entry, once per item
             for (const Entry& e : mEntries) {
                 std::array<std::int64_t, 6> b{};
                 cellRange(e.box, b);
-                if (e.key == pack(b[0], b[1], b[2]) && overlaps(q, e.box)) f(int(e.item));
+                if (e.item > after && e.key == pack(b[0], b[1], b[2]) && overlaps(q, e.box)) f(int(e.item));
             }
             return;
         }
+        // Cells outside the grid's range hold nothing (and their keys would wrap): clamp.
+        for (int k = 0; k < 3; ++k) {
+            c[std::size_t(k)] = std::max<std::int64_t>(c[std::size_t(k)], 0);
+            c[std::size_t(k) + 3] = std::min<std::int64_t>(c[std::size_t(k) + 3], kCoordMask);
+            if (c[std::size_t(k)] > c[std::size_t(k) + 3]) return;
+        }
+        const std::uint64_t span = std::uint64_t(c[5] - c[2]);
         for (std::int64_t x = c[0]; x <= c[3]; ++x)
-            for (std::int64_t y = c[1]; y <= c[4]; ++y)
-                for (std::int64_t z = c[2]; z <= c[5]; ++z) {
-                    const std::uint64_t key = pack(x, y, z);
-                    const std::size_t b = bucket(key);
-                    for (std::uint32_t i = mStart[b], end = mStart[b + 1]; i < end; ++i) {
-                        const Entry& e = mEntries[i];
-                        if (e.key != key || !overlaps(q, e.box)) continue;
-                        // Report in the cell of the intersection's lower corner only (the item's
-                        // own lower cell matters only where the query starts before this cell).
-                        if ((x != c[0] && cell(e.box[0]) != x) || (y != c[1] && cell(e.box[1]) != y) ||
-                            (z != c[2] && cell(e.box[2]) != z))
-                            continue;
-                        f(int(e.item));
+            for (std::int64_t y = c[1]; y <= c[4]; ++y) {
+                const std::uint64_t first = pack(x, y, c[2]);
+                const std::size_t b0 = bucketOf(first), b1 = b0 + std::size_t(span);
+                // The column's cells z0..z1 are buckets b0..b1 (mod the bucket count): one run of
+                // entries, or two where it wraps.
+                const std::size_t runs[2][2] = {{b0, std::min(b1, mMask)}, {0, b1 > mMask ? b1 - mMask - 1 : 0}};
+                for (int r = 0; r < (b1 > mMask ? 2 : 1); ++r) {
+                    // Without branches first (most entries are rejected: a branch per entry would
+                    // be mispredicted often), in blocks: the hits' indices, then the hits.
+                    std::uint32_t i = mStart[runs[r][0]];
+                    const std::uint32_t end = mStart[runs[r][1] + 1];
+                    while (i < end) {
+                        std::uint32_t hits[32];
+                        int count = 0;
+                        for (const std::uint32_t stop = std::min(end, i + 32); i < stop; ++i) {
+                            const Entry& e = mEntries[i];
+                            hits[count] = i;
+                            count += (e.key - first <= span) & (e.item > after) & (qf[0] <= e.box[3]) &
+                                     (e.box[0] <= qf[3]) & (qf[1] <= e.box[4]) & (e.box[1] <= qf[4]) &
+                                     (qf[2] <= e.box[5]) & (e.box[2] <= qf[5]);
+                        }
+                        for (int h = 0; h < count; ++h) {
+                            const Entry& e = mEntries[hits[h]];
+                            // Report in the cell of the intersection's lower corner only: on each
+                            // axis, the query's first cell or the item's.
+                            const std::int64_t z = std::int64_t(e.key & kCoordMask);
+                            if ((x != c[0] && !(e.lowest & 1)) || (y != c[1] && !(e.lowest & 2)) ||
+                                (z != c[2] && !(e.lowest & 4)))
+                                continue;
+                            f(int(e.item));
+                        }
                     }
                 }
+            }
     }
 
 private:
@@ -237,45 +279,75 @@ private:
         std::uint64_t key;
         std::int32_t item;
         std::array<float, 6> box; ///< lo xyz, hi xyz, rounded outward
+        std::uint8_t lowest;      ///< bits 1, 2, 4: this cell is the item's first on x, y, z
     };
     static constexpr std::int64_t kMaxSpan = 64;
+    static constexpr std::int64_t kCoordMask = (std::int64_t(1) << 21) - 1;
+    static constexpr double kHuge = 1e30;
+    /// x rounded to a float toward -infinity (up: toward +infinity); the float neighbour is
+    /// taken on the bits (std::nextafter is a library call, and this runs six times a query).
     static float down(double x)
     {
-        float f = float(x);
-        if (double(f) > x) f = std::nextafter(f, -std::numeric_limits<float>::infinity());
-        return f;
+        const float f = float(x);
+        return double(f) > x ? step(f, -1) : f;
     }
     static float up(double x)
     {
-        float f = float(x);
-        if (double(f) < x) f = std::nextafter(f, std::numeric_limits<float>::infinity());
+        const float f = float(x);
+        return double(f) < x ? step(f, +1) : f;
+    }
+    /// The next float after the finite f toward the sign of `direction`.
+    static float step(float f, int direction)
+    {
+        if (f == 0) return direction > 0 ? std::numeric_limits<float>::denorm_min() : -std::numeric_limits<float>::denorm_min();
+        if (!std::isfinite(f)) { // beyond the float range: the largest float on the right side
+            const float big = std::numeric_limits<float>::max();
+            return direction > 0 ? (f > 0 ? f : -big) : (f < 0 ? f : big);
+        }
+        std::uint32_t bits;
+        std::memcpy(&bits, &f, sizeof bits);
+        bits = (f > 0) == (direction > 0) ? bits + 1 : bits - 1; // away from zero: larger magnitude
+        std::memcpy(&f, &bits, sizeof bits);
         return f;
     }
     static bool overlaps(const Box6& q, const std::array<float, 6>& b)
     {
         return q[0] <= b[3] && b[0] <= q[3] && q[1] <= b[4] && b[1] <= q[4] && q[2] <= b[5] && b[2] <= q[5];
     }
-    std::int64_t cell(float x) const { return std::int64_t(std::floor(double(x) * mInvCell)); }
+    /// floor(s) for |s| < 1e15 (inline: std::floor is a library call without SSE4.1).
+    static std::int64_t floorOf(double s)
+    {
+        const std::int64_t i = std::int64_t(s);
+        return double(i) > s ? i - 1 : i;
+    }
     bool cellRange(const std::array<float, 6>& b, std::array<std::int64_t, 6>& c) const
     {
         for (int k = 0; k < 6; ++k) {
-            const double s = double(b[std::size_t(k)]) * mInvCell;
+            const double s = double(b[std::size_t(k)]) * mInvCell - mOrigin[std::size_t(k % 3)];
             if (!(std::abs(s) < 1e15)) return false; // non-finite or absurd
-            c[std::size_t(k)] = std::int64_t(std::floor(s));
+            c[std::size_t(k)] = floorOf(s);
         }
         for (int k = 0; k < 3; ++k)
             if (c[std::size_t(k)] > c[std::size_t(k) + 3] || c[std::size_t(k) + 3] - c[std::size_t(k)] > kMaxSpan) return false;
         return true;
     }
+    /// Cell coordinates relative to the origin (0 <= x, y, z < 2^21 for the boxes built; a query's
+    /// are clamped to that range), z in the low bits.
     static std::uint64_t pack(std::int64_t x, std::int64_t y, std::int64_t z)
     {
-        constexpr std::uint64_t m = (std::uint64_t(1) << 21) - 1;
-        return ((std::uint64_t(x) & m) << 42) | ((std::uint64_t(y) & m) << 21) | (std::uint64_t(z) & m);
+        return ((std::uint64_t(x) & kCoordMask) << 42) | ((std::uint64_t(y) & kCoordMask) << 21) |
+               (std::uint64_t(z) & kCoordMask);
     }
-    std::size_t bucket(std::uint64_t key) const { return std::size_t((key * 0x9E3779B97F4A7C15ull) >> (64 - mBits)); }
+    /// The column's hash plus z: consecutive cells along z are consecutive buckets.
+    std::size_t bucketOf(std::uint64_t key) const
+    {
+        const std::uint64_t column = key >> 21;
+        return std::size_t(((column * 0x9E3779B97F4A7C15ull) >> 32) + (key & kCoordMask)) & mMask;
+    }
 
     double mInvCell = 1.0;
-    int mBits = 6;
+    std::array<double, 3> mOrigin = {0, 0, 0};
+    std::size_t mMask = 63;
     std::vector<std::uint32_t> mStart, mFill, mBucket;
     std::vector<Entry> mEntries, mTemp, mLarge;
 };
