@@ -391,10 +391,29 @@ SafeStepStats limitStepToCollisionFree(Mesh& mesh, const std::vector<Vec3>& star
     return stats;
 }
 
-bool facesMeetMesh(const Mesh& mesh, const std::vector<FaceHandle>& faces)
+double triangleSeparation(const std::array<int, 3>& ia, const std::array<Vec3, 3>& a, const std::array<int, 3>& ib,
+                          const std::array<Vec3, 3>& b)
+{
+    auto in = [](int v, const std::array<int, 3>& ids) { return v == ids[0] || v == ids[1] || v == ids[2]; };
+    double best = std::numeric_limits<double>::infinity();
+    for (int i = 0; i < 3; ++i) {
+        if (!in(ia[std::size_t(i)], ib)) best = std::min(best, pointTriangleDistanceSquared(a[std::size_t(i)], b[0], b[1], b[2]));
+        if (!in(ib[std::size_t(i)], ia)) best = std::min(best, pointTriangleDistanceSquared(b[std::size_t(i)], a[0], a[1], a[2]));
+    }
+    for (std::size_t i = 0; i < 3; ++i)
+        for (std::size_t j = 0; j < 3; ++j) {
+            const std::size_t i1 = (i + 1) % 3, j1 = (j + 1) % 3;
+            if (ia[i] == ib[j] || ia[i] == ib[j1] || ia[i1] == ib[j] || ia[i1] == ib[j1]) continue;
+            best = std::min(best, segmentSegmentDistanceSquared(a[i], a[i1], b[j], b[j1]));
+        }
+    return std::sqrt(best);
+}
+
+bool facesMeetMesh(const Mesh& mesh, const std::vector<FaceHandle>& faces, double minSeparation)
 {
     struct Face {
         std::array<int, 3> ids;
+        std::array<Vec3, 3> p;
         detail::TriangleRef ref;
         Box6 box;
     };
@@ -404,11 +423,14 @@ bool facesMeetMesh(const Mesh& mesh, const std::vector<FaceHandle>& faces)
         x.ids = {mesh.from_vertex_handle(h).idx(), mesh.to_vertex_handle(h).idx(),
                  mesh.to_vertex_handle(mesh.next_halfedge_handle(h)).idx()};
         const double* p[3];
-        for (int i = 0; i < 3; ++i) p[i] = mesh.point(VertexHandle(x.ids[std::size_t(i)])).data();
+        for (int i = 0; i < 3; ++i) {
+            p[i] = mesh.point(VertexHandle(x.ids[std::size_t(i)])).data();
+            x.p[std::size_t(i)] = Vec3(p[i][0], p[i][1], p[i][2]);
+        }
         x.ref = detail::makeTriangle(p[0], p[1], p[2]);
-        for (int k = 0; k < 3; ++k) {
-            x.box[k] = std::min({p[0][k], p[1][k], p[2][k]});
-            x.box[k + 3] = std::max({p[0][k], p[1][k], p[2][k]});
+        for (int k = 0; k < 3; ++k) { // grown by the separation: a closer face's box overlaps
+            x.box[k] = std::min({p[0][k], p[1][k], p[2][k]}) - 0.5 * minSeparation;
+            x.box[k + 3] = std::max({p[0][k], p[1][k], p[2][k]}) + 0.5 * minSeparation;
         }
         return x;
     };
@@ -424,9 +446,10 @@ bool facesMeetMesh(const Mesh& mesh, const std::vector<FaceHandle>& faces)
             all[k + 3] = std::max(all[k + 3], mine.back().box[k + 3]);
         }
     }
-    auto meet = [](const Face& x, const Face& y) {
+    auto meet = [minSeparation](const Face& x, const Face& y) {
         return detail::boxesOverlap(x.box, y.box) &&
-               detail::classifyTriangles(x.ids, x.ref, y.ids, y.ref) != detail::TriangleContact::None;
+               (detail::classifyTriangles(x.ids, x.ref, y.ids, y.ref) != detail::TriangleContact::None ||
+                (minSeparation > 0 && triangleSeparation(x.ids, x.p, y.ids, y.p) < minSeparation));
     };
     for (std::size_t i = 0; i < mine.size(); ++i)
         for (std::size_t j = i + 1; j < mine.size(); ++j)

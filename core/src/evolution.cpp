@@ -34,6 +34,9 @@ constexpr std::size_t kRenumberMinVertices = 16384;
 /// A component of a coarse level with this many vertices or fewer has collapsed (see
 /// updateConvergence()).
 constexpr std::size_t kCollapsedComponent = 6;
+/// Edits of the intersection-free evolution keep this fraction of its minimal separation between
+/// their new faces and the rest (see step()).
+constexpr double kEditSeparation = 1e-3;
 
 /// The number of vertices of the smallest connected component (0 for an empty mesh).
 std::size_t smallestComponent(const Mesh& mesh)
@@ -213,6 +216,11 @@ IterationStats Evolution::step()
     ro.delta = o.delta;
     ro.zeta = o.zeta;
     ro.intersectionFree = o.intersectionFree;
+    // Edits leave their new faces a little apart from the rest (far above round-off, far below
+    // what a merge bridges): left 1e-15 from a face, a vertex is on either side of it after the
+    // next motion however the step is limited (stress case 7047475164732749801: a merge band).
+    const double editSeparation = o.intersectionFree ? kEditSeparation * o.minSeparation * o.delta : 0.0;
+    ro.minSeparation = editSeparation;
     if (mLevel > 0 && int(mHistory.size()) - mLevelStart < o.levelSettleIterations) {
         const double c = std::min(o.levelSettleFactor, 0.5 * o.zeta); // halves of a split edge stay >= c delta
         ro.delta = c * o.delta;
@@ -234,6 +242,7 @@ IterationStats Evolution::step()
     if (!collisions.empty() || !rs.tunnels.empty()) {
         TopologyOptions to;
         to.neighbourhoodRadius = co.neighbourhoodFactor * collisionRadius(mMetric, co);
+        to.minSeparation = editSeparation;
         ts = resolveTopology(mMesh, collisions, rs.tunnels, to);
     }
     if (!ts.unresolved.empty() || !contacts.empty()) { // before garbage collection: handles valid

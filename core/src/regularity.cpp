@@ -78,7 +78,7 @@ public:
         : mMesh(mesh), mMetric(metric), mVertexMetrics(mesh, metric), mStats(stats), mLo(options.delta),
           mHi(options.zeta * options.delta)
     {
-        if (options.intersectionFree) mGuard = std::make_unique<detail::IntersectionGuard>(mesh);
+        if (options.intersectionFree) mGuard = std::make_unique<detail::IntersectionGuard>(mesh, options.minSeparation);
     }
 
     /// Euclidean length of edge e (world units).

@@ -277,14 +277,22 @@ bool zipBand(const Mesh& mesh, const std::vector<VertexHandle>& a, const std::ve
 /// True when the band faces meet neither each other nor any face of the mesh that stays (all but
 /// the one-rings of u and w), beyond the vertices and edges they share (exact tests, see
 /// riemesh/self_intersection.h). A band that folds or twists, or cuts through a nearby sheet,
-/// would leave the surface self-intersecting.
-bool isBandEmbedded(const Mesh& mesh, const std::vector<FaceHandle>& nearby, const std::vector<Triangle>& band)
+/// would leave the surface self-intersecting. With minSeparation > 0, a band face may come no
+/// closer than that to a face it shares no vertex with (triangleSeparation, riemesh/ccd.h).
+bool isBandEmbedded(const Mesh& mesh, const std::vector<FaceHandle>& nearby, const std::vector<Triangle>& band,
+                    double minSeparation)
 {
     using detail::TriangleRef;
     auto corners = [&](const Triangle& t) {
         return detail::makeTriangle(mesh.point(t[0]).data(), mesh.point(t[1]).data(), mesh.point(t[2]).data());
     };
     auto ids = [](const Triangle& t) { return std::array<int, 3>{t[0].idx(), t[1].idx(), t[2].idx()}; };
+    auto points = [&](const Triangle& t) {
+        return std::array<Vec3, 3>{position(mesh, t[0]), position(mesh, t[1]), position(mesh, t[2])};
+    };
+    auto tooClose = [&](const Triangle& x, const Triangle& y) {
+        return minSeparation > 0 && triangleSeparation(ids(x), points(x), ids(y), points(y)) < minSeparation;
+    };
     Eigen::AlignedBox3d box;
     std::vector<TriangleRef> refs;
     for (const Triangle& t : band) {
@@ -300,18 +308,22 @@ bool isBandEmbedded(const Mesh& mesh, const std::vector<FaceHandle>& nearby, con
     }
     for (std::size_t i = 0; i < band.size(); ++i)
         for (std::size_t j = i + 1; j < band.size(); ++j)
-            if (detail::classifyTriangles(ids(band[i]), refs[i], ids(band[j]), refs[j]) != detail::TriangleContact::None)
+            if (detail::classifyTriangles(ids(band[i]), refs[i], ids(band[j]), refs[j]) != detail::TriangleContact::None ||
+                tooClose(band[i], band[j]))
                 return false;
     // The faces that stay, near the band.
     for (const FaceHandle f : nearby) {
         const Triangle t = faceVertices(mesh, f);
         Eigen::AlignedBox3d faceBox;
         for (auto v : t) faceBox.extend(position(mesh, v));
+        faceBox.extend(faceBox.min() - Vec3::Constant(minSeparation));
+        faceBox.extend(faceBox.max() + Vec3::Constant(minSeparation));
         if (!box.intersects(faceBox)) continue;
         const TriangleRef ref = corners(t);
         if (ref.axis < 0) continue; // a degenerate face of the surface: nothing to cross
         for (std::size_t i = 0; i < band.size(); ++i)
-            if (detail::classifyTriangles(ids(band[i]), refs[i], ids(t), ref) != detail::TriangleContact::None)
+            if (detail::classifyTriangles(ids(band[i]), refs[i], ids(t), ref) != detail::TriangleContact::None ||
+                tooClose(band[i], t))
                 return false;
     }
     return true;
@@ -321,7 +333,7 @@ bool isBandEmbedded(const Mesh& mesh, const std::vector<FaceHandle>& nearby, con
 /// shortest cross edges in total that is embedded. Starting at the closest pair alone twists the
 /// band when the two loops are tilted or offset against each other (seen when the two ends of a
 /// tube meet at an angle), and a twisted band crosses itself. False when no zip is embedded.
-bool chooseBand(const Mesh& mesh, VertexHandle u, VertexHandle w, std::vector<Triangle>& band)
+bool chooseBand(const Mesh& mesh, VertexHandle u, VertexHandle w, std::vector<Triangle>& band, double minSeparation)
 {
     std::vector<VertexHandle> a, b;
     if (!collectLoop(mesh, u, a) || !collectLoop(mesh, w, b)) return false;
@@ -352,12 +364,14 @@ bool chooseBand(const Mesh& mesh, VertexHandle u, VertexHandle w, std::vector<Tr
             if (std::find(t.begin(), t.end(), u) != t.end() || std::find(t.begin(), t.end(), w) != t.end()) continue;
             Eigen::AlignedBox3d faceBox;
             for (auto v : t) faceBox.extend(position(mesh, v));
+            faceBox.extend(faceBox.min() - Vec3::Constant(minSeparation));
+            faceBox.extend(faceBox.max() + Vec3::Constant(minSeparation));
             if (loops.intersects(faceBox)) nearby.push_back(f);
         }
     for (const Zip& z : zips) {
         double length = 0;
         zipBand(mesh, a, b, z.i0, z.j0, band, length);
-        if (isBandEmbedded(mesh, nearby, band)) return true;
+        if (isBandEmbedded(mesh, nearby, band, minSeparation)) return true;
     }
     band.clear();
     return false;
@@ -365,7 +379,7 @@ bool chooseBand(const Mesh& mesh, VertexHandle u, VertexHandle w, std::vector<Tr
 
 } // namespace
 
-bool canMerge(const Mesh& mesh, VertexHandle u, VertexHandle w)
+bool canMerge(const Mesh& mesh, VertexHandle u, VertexHandle w, double minSeparation)
 {
     if (!mesh.has_vertex_status() || !mesh.has_face_status() || !mesh.has_edge_status()) return false;
     if (!isAlive(mesh, u) || !isAlive(mesh, w) || u == w) return false;
@@ -386,13 +400,13 @@ bool canMerge(const Mesh& mesh, VertexHandle u, VertexHandle w)
         for (auto y : mesh.vv_range(x))
             if (contains(b, y)) return false;
     std::vector<Triangle> band;
-    return chooseBand(mesh, u, w, band);
+    return chooseBand(mesh, u, w, band, minSeparation);
 }
 
-bool merge(Mesh& mesh, VertexHandle u, VertexHandle w)
+bool merge(Mesh& mesh, VertexHandle u, VertexHandle w, double minSeparation)
 {
     std::vector<Triangle> band;
-    if (!canMerge(mesh, u, w) || !chooseBand(mesh, u, w, band)) return false;
+    if (!canMerge(mesh, u, w, minSeparation) || !chooseBand(mesh, u, w, band, minSeparation)) return false;
     const Mesh backup = mesh;
     mesh.delete_vertex(u, false);
     mesh.delete_vertex(w, false);
@@ -415,7 +429,7 @@ bool canCutTunnel(const Mesh& mesh, VertexHandle u, VertexHandle v, VertexHandle
     return partitionTunnelSides(mesh, u, v, w, sides);
 }
 
-bool cutTunnel(Mesh& mesh, VertexHandle u, VertexHandle v, VertexHandle w)
+bool cutTunnel(Mesh& mesh, VertexHandle u, VertexHandle v, VertexHandle w, double minSeparation)
 {
     if (!canCutTunnel(mesh, u, v, w)) return false;
     TunnelSides sides;
@@ -480,7 +494,7 @@ bool cutTunnel(Mesh& mesh, VertexHandle u, VertexHandle v, VertexHandle w)
     bool embedded = false;
     for (const double pull : {0.25, 0.1, 0.03}) {
         for (int i = 0; i < 6; ++i) mesh.set_point(moved[i], origin[i] + pull * (centroid[i] - origin[i]));
-        if (!facesMeetMesh(mesh, pulled)) {
+        if (!facesMeetMesh(mesh, pulled, minSeparation)) {
             embedded = true;
             break;
         }
@@ -509,7 +523,7 @@ TopologyStats resolveTopology(Mesh& mesh, const std::vector<CollisionPair>& coll
     for (const TunnelCandidate& t : tunnels) {
         if (!isUsable(t.u) || !isUsable(t.v) || !isUsable(t.w)) { ++stats.rejected; continue; }
         const std::size_t before = mesh.n_vertices();
-        if (!cutTunnel(mesh, t.u, t.v, t.w)) { ++stats.rejected; continue; }
+        if (!cutTunnel(mesh, t.u, t.v, t.w, options.minSeparation)) { ++stats.rejected; continue; }
         ++stats.cuts;
         std::vector<VertexHandle> changed{t.u, t.v, t.w};
         for (std::size_t i = before; i < mesh.n_vertices(); ++i) changed.push_back(VertexHandle(int(i)));
@@ -529,7 +543,7 @@ TopologyStats resolveTopology(Mesh& mesh, const std::vector<CollisionPair>& coll
         if (isAlive(mesh, c.u) && isAlive(mesh, c.w)) stats.unresolved.push_back(c);
     };
     for (const CollisionPair& c : order) {
-        if (!isUsable(c.u) || !isUsable(c.w) || !canMerge(mesh, c.u, c.w)) { reject(c); continue; }
+        if (!isUsable(c.u) || !isUsable(c.w) || !canMerge(mesh, c.u, c.w, options.minSeparation)) { reject(c); continue; }
         if (stats.merges + stats.cuts > 0) {
             const double bound = options.neighbourhoodRadius > 0
                                      ? options.neighbourhoodRadius
@@ -538,7 +552,7 @@ TopologyStats resolveTopology(Mesh& mesh, const std::vector<CollisionPair>& coll
         }
         collectLoop(mesh, c.u, a);
         collectLoop(mesh, c.w, b);
-        if (!merge(mesh, c.u, c.w)) { reject(c); continue; }
+        if (!merge(mesh, c.u, c.w, options.minSeparation)) { reject(c); continue; }
         ++stats.merges;
         markTouched(c.u);
         markTouched(c.w);

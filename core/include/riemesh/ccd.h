@@ -68,10 +68,19 @@ struct SafeStepStats {
 /// Deterministic. Deleted elements are ignored.
 SafeStepStats limitStepToCollisionFree(Mesh& mesh, const std::vector<Vec3>& start, const SafeStepOptions& options = {});
 
+/// The smallest distance between a corner of triangle a and triangle b (or a corner of b and a),
+/// or an edge of a and an edge of b, over the pairs that share no vertex (ia, ib: the corners'
+/// vertex indices); infinity when there is none (the same triangle). An edit that leaves new
+/// faces at least some minimal separation from the rest keeps the next step's collision checks
+/// out of round-off: a vertex left 1e-15 from a face is on either side of it after any motion.
+double triangleSeparation(const std::array<int, 3>& ia, const std::array<Vec3, 3>& a, const std::array<int, 3>& ib,
+                          const std::array<Vec3, 3>& b);
+
 /// True when one of the live `faces` of `mesh` meets another live face (of the list or not)
-/// anywhere but where they share vertices (exact; the classification of findSelfIntersections).
+/// anywhere but where they share vertices (exact; the classification of findSelfIntersections),
+/// or, with minSeparation > 0, comes closer to it than that (triangleSeparation).
 /// O(faces of the mesh): for occasional edits (a tunnel cut); regularity uses a spatial grid.
-bool facesMeetMesh(const Mesh& mesh, const std::vector<FaceHandle>& faces);
+bool facesMeetMesh(const Mesh& mesh, const std::vector<FaceHandle>& faces, double minSeparation = 0);
 
 /// The smallest distance between a vertex and a face, or two edges, that share no vertex (world
 /// units); `radius` when none is closer than that (only pairs within radius are measured).

@@ -16,6 +16,9 @@ struct RegularityOptions {
     /// Refuse the collapses and flips that would make two faces cross (exact tests against the
     /// faces nearby, issue 17). Splits at an edge's midpoint keep the surface where it is.
     bool intersectionFree = false;
+    /// With intersectionFree: the new faces of a collapse or flip keep at least this distance
+    /// (world units) from the faces they share no vertex with.
+    double minSeparation = 0.0;
 };
 
 struct RegularityStats {

@@ -45,13 +45,14 @@ inline constexpr int kMergeZoneIterations = 10;
 /// True when merge(u, w) can run: both alive and distinct, not adjacent, closed one-rings
 /// disjoint, valence >= 3 each, no edge already joins a neighbour of u to a neighbour of w, and
 /// the two loops can be joined by a band that is embedded: its faces cross neither each other nor
-/// the rest of the surface (exact tests; see self_intersection.h for what counts).
-bool canMerge(const Mesh& mesh, VertexHandle u, VertexHandle w);
+/// the rest of the surface (exact tests; see self_intersection.h for what counts), nor come
+/// closer than minSeparation (world units) to a face they share no vertex with.
+bool canMerge(const Mesh& mesh, VertexHandle u, VertexHandle w, double minSeparation = 0);
 /// Fig. 3a. Returns false (mesh untouched) when canMerge is false. Orientation is forced by the
 /// boundary halfedges of the two loops; the band zips greedily along the shorter diagonal from a
 /// starting pair of loop vertices: of all starting pairs, the embedded band with the shortest
 /// cross edges in total. No vertex is moved.
-bool merge(Mesh& mesh, VertexHandle u, VertexHandle w);
+bool merge(Mesh& mesh, VertexHandle u, VertexHandle w, double minSeparation = 0);
 
 /// True when cutTunnel(u, v, w) can run: the three edges exist, (u, v, w) is not a face, and the
 /// faces around u, v, w split into two sides (left of u->v->w and right of it) that the loop
@@ -63,8 +64,9 @@ bool canCutTunnel(const Mesh& mesh, VertexHandle u, VertexHandle v, VertexHandle
 /// the right side gets copies (velocity and every other non-built-in vertex property copied).
 /// Each loop vertex and each copy then moves a quarter of the way toward the centroid of its own
 /// side's other neighbours, so the two caps are apart. Both caps and the two rings around them get
-/// a fresh kCutIdProperty id.
-bool cutTunnel(Mesh& mesh, VertexHandle u, VertexHandle v, VertexHandle w);
+/// a fresh kCutIdProperty id. The caps are pulled less where they would cross a face or come closer
+/// to one than minSeparation (world units); no cut where even a small pull would.
+bool cutTunnel(Mesh& mesh, VertexHandle u, VertexHandle v, VertexHandle w, double minSeparation = 0);
 
 struct TopologyStats {
     int merges = 0;   ///< Fig. 3a operations performed
@@ -82,6 +84,9 @@ struct TopologyOptions {
     /// 2 x the collision radius for a regular mesh). Pass neighbourhoodFactor * collisionRadius
     /// for the exact value used by findCollisions.
     double neighbourhoodRadius = 0.0;
+    /// Merge bands and cut caps keep at least this distance (world units) from the faces they
+    /// share no vertex with (0: only no crossing); the intersection-free evolution sets it.
+    double minSeparation = 0.0;
 };
 
 /// Applies cuts for the tunnel candidates, then merges for the collision pairs (closest first),

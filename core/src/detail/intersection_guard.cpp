@@ -1,5 +1,7 @@
 #include "detail/intersection_guard.h"
 
+#include "riemesh/ccd.h"
+
 #include "detail/triangle_intersection.h"
 
 #include <algorithm>
@@ -50,15 +52,21 @@ bool IntersectionGuard::crosses(const std::vector<Triangle>& made, const std::ar
         refs.push_back(makeTriangle(t.p[0].data(), t.p[1].data(), t.p[2].data()));
         if (refs.back().axis < 0) return true; // a flat triangle: refuse
     }
+    auto tooClose = [&](const std::array<int, 3>& ia, const std::array<Vec3, 3>& a, const std::array<int, 3>& ib,
+                        const std::array<Vec3, 3>& b) {
+        return mMinSeparation > 0 && triangleSeparation(ia, a, ib, b) < mMinSeparation;
+    };
     for (std::size_t i = 0; i < made.size(); ++i)
         for (std::size_t j = i + 1; j < made.size(); ++j)
-            if (classifyTriangles(made[i].ids, refs[i], made[j].ids, refs[j]) != TriangleContact::None) return true;
+            if (classifyTriangles(made[i].ids, refs[i], made[j].ids, refs[j]) != TriangleContact::None ||
+                tooClose(made[i].ids, made[i].p, made[j].ids, made[j].p))
+                return true;
     for (std::size_t i = 0; i < made.size(); ++i) {
         const Triangle& t = made[i];
         Box6 box;
         for (int k = 0; k < 3; ++k) {
-            box[k] = std::min({t.p[0][k], t.p[1][k], t.p[2][k]});
-            box[k + 3] = std::max({t.p[0][k], t.p[1][k], t.p[2][k]});
+            box[k] = std::min({t.p[0][k], t.p[1][k], t.p[2][k]}) - mMinSeparation;
+            box[k + 3] = std::max({t.p[0][k], t.p[1][k], t.p[2][k]}) + mMinSeparation;
         }
         bool hit = false;
         mGrid.query(box, [&](int fi) {
@@ -75,6 +83,11 @@ bool IntersectionGuard::crosses(const std::vector<Triangle>& made, const std::ar
                                                  mMesh.point(VertexHandle(ids[2])).data());
             if (ref.axis < 0) return; // a degenerate face: nothing to cross
             if (classifyTriangles(t.ids, refs[i], ids, ref) != TriangleContact::None) hit = true;
+            else if (mMinSeparation > 0) {
+                const std::array<Vec3, 3> q = {position(mMesh, VertexHandle(ids[0])), position(mMesh, VertexHandle(ids[1])),
+                                               position(mMesh, VertexHandle(ids[2]))};
+                hit = tooClose(t.ids, t.p, ids, q);
+            }
         });
         if (hit) return true;
     }

@@ -16,7 +16,9 @@ namespace riemesh::detail {
 
 class IntersectionGuard {
 public:
-    explicit IntersectionGuard(const Mesh& mesh) : mMesh(mesh) {}
+    /// minSeparation > 0: an edit is refused too when its new faces come closer than that (world
+    /// units) to a face they share no vertex with (triangleSeparation, riemesh/ccd.h).
+    explicit IntersectionGuard(const Mesh& mesh, double minSeparation = 0) : mMesh(mesh), mMinSeparation(minSeparation) {}
 
     /// Collapsing h (its from-vertex into its to-vertex, moved to `target`, world units) leaves
     /// no two faces crossing (given none crossed before).
@@ -39,6 +41,7 @@ private:
     Box6 faceBox(FaceHandle f) const;
 
     const Mesh& mMesh;
+    double mMinSeparation = 0;
     BoxGrid mGrid;
     bool mBuilt = false;
     std::vector<Triangle> mMade; // scratch
