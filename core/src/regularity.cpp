@@ -40,11 +40,19 @@ namespace riemesh {
 
 namespace {
 
-/// Collapses may make edges up to this fraction of zeta delta (see keepsEdgesShortEnough). Below
-/// 1 it stops a split/collapse churn along the creases of the 300^3 phantom at delta 9 (0.95: it
-/// converges in 162 iterations instead of running to the cap), but 0.95 failed two core tests in
-/// the WebAssembly build (an edge left too long, a slower start): kept at 1 until that is understood.
+/// Collapses may make edges up to this fraction of zeta delta (see keepsEdgesShortEnough). 0.95 was
+/// tried against the split/collapse churn along the creases of the 300^3 phantom at delta 9: it
+/// converged there (162 iterations) only because the churn's travelling vertices happened to drop
+/// from 3 to 2 (the convergence test allows 0.2% of 1,335); it still split and collapsed 3-5 edges
+/// an iteration. The churn comes from a metric that grows by a large factor along one edge; the
+/// collapses that feed it are refused by splitsIntoRegularHalves instead.
 constexpr double kCollapseMargin = 1.0;
+/// Collapses that would make an edge longer than this fraction of zeta delta check that the edge
+/// could be split into regular halves once motion stretches it past zeta delta
+/// (splitsIntoRegularHalves). 0.5: an edge no longer than the halves of a fresh split is far from
+/// a split. (0 checks every edge made: 1,516 vertices on the 100^3 phantom instead of 1,493; 0.75
+/// leaves the 300^3 phantom at delta 9 converging in 160 iterations instead of 118.)
+constexpr double kUnsplittableCheck = 0.5;
 
 /// An edge waiting in a split or collapse queue. An entry whose edge no longer has the metric
 /// length it was queued with is stale and skipped: every edit re-queues the edges it changes.
@@ -555,24 +563,53 @@ private:
     }
 
     /// True when no edge from `target` to a neighbour of u or v would exceed kCollapseMargin zeta
-    /// delta (metric length): refusing those collapses avoids split/collapse oscillation. With the
-    /// bound itself, an edge made just under zeta delta can be pushed over it by the next motion,
-    /// split, and its short median collapsed again, every iteration (a few edges along the
-    /// phantom's creases at 300^3, delta 9: that run does not converge, 3,000 iterations).
+    /// delta (metric length), nor be an edge that could not be split into regular halves
+    /// (splitsIntoRegularHalves): refusing those collapses avoids split/collapse oscillation.
+    ///
+    /// The second condition is the one that matters where the metric grows by a large factor along
+    /// an edge (a vertex on a face next to one on a crease, G ~4.5x larger along the edge at the
+    /// crease end on the 300^3 phantom at delta 9). The mean of the end tensors then overestimates
+    /// the edge: once the forces' rest position makes it longer than zeta delta it is split at its
+    /// midpoint, the half on the face side comes out shorter than delta (0.7-0.9 delta), the
+    /// collapse of that half moves the face vertex a quarter of the way toward the crease and makes
+    /// the edge again (0.85-0.99 zeta delta), and the forces pull the vertex back: 3-8 splits and as
+    /// many collapses every iteration, and the vertices pulled back count as travelling, so the run
+    /// never converges (3,000 iterations). A margin on the first condition cannot stop it (the
+    /// forces' rest position is past zeta delta whatever the margin): keeping the short half can.
     bool keepsEdgesShortEnough(VertexHandle u, VertexHandle v, const Vec3& target) const
     {
         const bool euclidean = mMetric.isEuclidean();
         const Mat3 gTarget = euclidean ? Mat3(Mat3::Identity()) : mMetric.at(target);
+        const double checkFrom2 = kUnsplittableCheck * kUnsplittableCheck * mHi * mHi;
         const VertexHandle ends[2] = {u, v};
         for (const VertexHandle end : ends) {
             for (auto n = mMesh.cvv_begin(end); n.is_valid(); ++n) {
                 if (*n == u || *n == v) continue;
-                const Vec3 d = position(mMesh, *n) - target;
+                const Vec3 pn = position(mMesh, *n);
+                const Vec3 d = pn - target;
                 const double l2 = euclidean ? d.squaredNorm() : d.dot((0.5 * (gTarget + vertexMetric(*n))) * d);
                 if (l2 > kCollapseMargin * kCollapseMargin * mHi * mHi) return false;
+                // A Euclidean edge always halves (and zeta > 2 keeps the halves at least delta).
+                if (!euclidean && l2 > checkFrom2 && !splitsIntoRegularHalves(target, gTarget, pn, vertexMetric(*n), std::sqrt(l2)))
+                    return false;
             }
         }
         return true;
+    }
+
+    /// True when the edge a-b (metric length l, G at its ends ga and gb), stretched to zeta delta,
+    /// would split at its midpoint into two halves of at least delta: the shorter half, measured
+    /// with G sampled at the midpoint as a split measures it, is at least l / zeta. With a constant
+    /// metric the halves are l / 2 and this holds for every zeta >= 2; it fails where G grows by a
+    /// large factor between the midpoint and one end (see keepsEdgesShortEnough). With zeta < 2 no
+    /// split leaves regular halves and there is nothing to protect: true.
+    bool splitsIntoRegularHalves(const Vec3& a, const Mat3& ga, const Vec3& b, const Mat3& gb, double l) const
+    {
+        if (mHi < 2.0 * mLo) return true;
+        const Vec3 mid = 0.5 * (a + b);
+        const Mat3 gm = mMetric.at(mid);
+        const double shorter = std::min(metricLength(ga, gm, mid - a), metricLength(gm, gb, b - mid));
+        return shorter * mHi >= (1.0 - 1e-9) * mLo * l; // equality: zeta = 2 with a constant metric
     }
 
     /// Records the tunnel u-v-w once (whichever of its edges found it).
