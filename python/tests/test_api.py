@@ -96,3 +96,19 @@ def test_init_spheres_inflate_inside_the_object():
     result = riemesh.mesh(two, 0.5, init="sphere:10,20,20,3;30,20,20,3", delta=1.5)
     assert result.stats["parameters"]["init"] == "sphere:10,20,20,3;30,20,20,3"
     assert result.stats["summary"]["components"] == 2
+
+
+def test_intersection_free_reaches_the_evolution():
+    # Two balls 2 voxels apart: the guarded evolution ends embedded, with the flag in the stats
+    # (the same flag as vdb2mesh --intersection-free; default off).
+    i, j, k = np.meshgrid(*[np.arange(48.0)] * 3, indexing="ij")
+    two = np.maximum(np.clip(9 - np.sqrt((i - 13) ** 2 + (j - 24) ** 2 + (k - 24) ** 2), 0, 1),
+                     np.clip(9 - np.sqrt((i - 35) ** 2 + (j - 24) ** 2 + (k - 24) ** 2), 0, 1))
+    plain = riemesh.mesh(two, 0.5)
+    assert plain.stats["parameters"]["intersection_free"] is False
+    guarded = riemesh.mesh(two, 0.5, intersection_free=True)
+    assert guarded.stats["parameters"]["intersection_free"] is True
+    assert guarded.stats["summary"]["self_intersections"] == 0
+    assert guarded.stats["summary"]["components"] == 2
+    with pytest.raises(TypeError):
+        riemesh.mesh(two, 0.5, intersection_free="yes please")
