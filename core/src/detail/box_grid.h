@@ -22,6 +22,14 @@ namespace riemesh::detail {
 /// lo xyz, hi xyz.
 using Box6 = std::array<double, 6>;
 
+/// floor(s) as an integer for |s| < 1e15 (inline: std::floor is a library call on x86-64 without
+/// SSE4.1, and the grids take several per query).
+inline std::int64_t floorToInt(double s)
+{
+    const std::int64_t i = std::int64_t(s);
+    return double(i) > s ? i - 1 : i;
+}
+
 inline bool boxesOverlap(const Box6& x, const Box6& y)
 {
     return x[0] <= y[3] && y[0] <= x[3] && x[1] <= y[4] && y[1] <= x[4] && x[2] <= y[5] && y[2] <= x[5];
@@ -119,13 +127,13 @@ private:
     /// Boxes spanning more cells than this on an axis are kept in mLarge, tested by every query.
     static constexpr std::int64_t kMaxSpan = 64;
 
-    std::int64_t cell(double x) const { return std::int64_t(std::floor(x * mInvCell)); }
+    std::int64_t cell(double x) const { return floorToInt(x * mInvCell); }
     bool cellRange(const Box6& b, std::array<std::int64_t, 6>& c) const
     {
         for (int k = 0; k < 6; ++k) {
             const double s = b[k] * mInvCell;
             if (!(std::abs(s) < 1e15)) return false; // non-finite or absurd
-            c[k] = std::int64_t(std::floor(s));
+            c[k] = floorToInt(s);
         }
         for (int k = 0; k < 3; ++k)
             if (c[k] > c[k + 3] || c[k + 3] - c[k] > kMaxSpan) return false;
@@ -314,18 +322,12 @@ private:
     {
         return q[0] <= b[3] && b[0] <= q[3] && q[1] <= b[4] && b[1] <= q[4] && q[2] <= b[5] && b[2] <= q[5];
     }
-    /// floor(s) for |s| < 1e15 (inline: std::floor is a library call without SSE4.1).
-    static std::int64_t floorOf(double s)
-    {
-        const std::int64_t i = std::int64_t(s);
-        return double(i) > s ? i - 1 : i;
-    }
     bool cellRange(const std::array<float, 6>& b, std::array<std::int64_t, 6>& c) const
     {
         for (int k = 0; k < 6; ++k) {
             const double s = double(b[std::size_t(k)]) * mInvCell - mOrigin[std::size_t(k % 3)];
             if (!(std::abs(s) < 1e15)) return false; // non-finite or absurd
-            c[std::size_t(k)] = floorOf(s);
+            c[std::size_t(k)] = floorToInt(s);
         }
         for (int k = 0; k < 3; ++k)
             if (c[std::size_t(k)] > c[std::size_t(k) + 3] || c[std::size_t(k) + 3] - c[std::size_t(k)] > kMaxSpan) return false;
