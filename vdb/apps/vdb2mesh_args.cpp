@@ -57,7 +57,7 @@ void printVdb2MeshUsage(std::FILE* out)
         "                       level about 16 edges across the image; 0 = the image only\n"
         "  --intersection-free  no iteration may make faces cross: continuous collision detection of\n"
         "                       every step, collapses, flips and cuts refused where faces would cross\n"
-        "                       (off by default: the evolution then takes 2.5-3.7x as long)\n"
+        "                       (off by default: the evolution then takes 2.2-2.3x as long)\n"
         "  --init I             box (default): a box around each separate part of the object (found on\n"
         "                       the coarsest level), deflating; the image box when no part is found\n"
         "                       sphere:X,Y,Z,R[;X,Y,Z,R...]  bubbles, world units, inflating\n"
