@@ -110,8 +110,8 @@ std::vector<CollisionPair> findCollisions(const Mesh& mesh, const MetricField& m
     const std::size_t n = mesh.n_vertices();
     Scratch& S = scratch();
 
-    // Area-weighted vertex normals: each face's in parallel, then summed per vertex in increasing
-    // face order (the sums one pass over the faces would make, for any thread count).
+    // Area-weighted vertex normals: each face's in parallel, then summed per vertex around it (the
+    // mesh's order: the same sums for any thread count).
     S.normal.assign(3 * n, 0.0);
     double* const normal = S.normal.data();
     const Mesh::Point* const point = mesh.points();
@@ -131,19 +131,13 @@ std::vector<CollisionPair> findCollisions(const Mesh& mesh, const MetricField& m
         double* const fn = faceNormal + 3 * fi;
         fn[0] = ey * gz - ez * gy, fn[1] = ez * gx - ex * gz, fn[2] = ex * gy - ey * gx;
     });
-    detail::parallelForChunks(0, n, kGrain, [&](std::size_t begin, std::size_t end) {
-        std::vector<int> faces;
-        for (std::size_t i = begin; i < end; ++i) {
-            const VertexHandle v{int(i)};
-            if (mesh.status(v).deleted()) continue;
-            faces.clear();
-            for (auto f = mesh.cvf_begin(v); f.is_valid(); ++f) faces.push_back(f->idx());
-            std::sort(faces.begin(), faces.end());
-            double* const nv = normal + 3 * i;
-            for (const int f : faces) {
-                const double* const fn = faceNormal + 3 * std::size_t(f);
-                nv[0] += fn[0], nv[1] += fn[1], nv[2] += fn[2];
-            }
+    detail::parallelFor(0, n, kGrain, [&](std::size_t i) {
+        const VertexHandle v{int(i)};
+        if (mesh.status(v).deleted()) return;
+        double* const nv = normal + 3 * i;
+        for (auto f = mesh.cvf_begin(v); f.is_valid(); ++f) { // the mesh's order: any thread count
+            const double* const fn = faceNormal + 3 * std::size_t(f->idx());
+            nv[0] += fn[0], nv[1] += fn[1], nv[2] += fn[2];
         }
     });
 

@@ -25,8 +25,8 @@ void computeForces(const Mesh& mesh, const ScalarImage& image, const ForceOption
     forces.assign(n, Vec3::Zero());
 
     // Area-weighted vertex normals and umbrella vectors. Per face and per edge in parallel, then
-    // gathered per vertex in increasing face / edge index: the sums a pass over the faces and the
-    // edges in index order would make, bit for bit, whatever the thread count.
+    // gathered per vertex around it (sorting each vertex's faces and edges by index, to sum as one
+    // pass over the faces would, doubled the cost of an iteration at one thread).
     static thread_local std::vector<Vec3> normalBuffer, neighbourSumBuffer, faceNormalBuffer;
     static thread_local std::vector<double> weightSumBuffer, edgeWeightBuffer;
     static thread_local std::vector<Mat3> tensorBuffer;
@@ -78,28 +78,17 @@ void computeForces(const Mesh& mesh, const ScalarImage& image, const ForceOption
             const double euclid = d.norm();
             edgeWeight[ei] = euclid > 0 ? metricLength(tensor[va.idx()], tensor[vb.idx()], d) / euclid : 1.0;
         });
-    detail::parallelForChunks(0, n, kGrain, [&](std::size_t begin, std::size_t end) {
-        // One turn around each vertex: its faces, and its edges with the vertex across each.
-        std::vector<int> faces;
-        std::vector<std::pair<int, int>> edges;
-        for (std::size_t i = begin; i < end; ++i) {
-            const VertexHandle v{int(i)};
-            if (deleted(v)) continue;
-            faces.clear();
-            edges.clear();
-            for (auto h = mesh.cvoh_begin(v); h.is_valid(); ++h) {
-                const FaceHandle f = mesh.face_handle(*h);
-                if (f.is_valid()) faces.push_back(f.idx());
-                edges.emplace_back(mesh.edge_handle(*h).idx(), mesh.to_vertex_handle(*h).idx());
-            }
-            std::sort(faces.begin(), faces.end());
-            std::sort(edges.begin(), edges.end());
-            for (const int f : faces) normal[i] += faceNormal[f];
-            for (const auto& [ei, other] : edges) {
-                const double w = riemannian ? edgeWeight[ei] : 1.0;
-                neighbourSum[i] += w * position(mesh, VertexHandle(other));
-                weightSum[i] += w;
-            }
+    detail::parallelFor(0, n, kGrain, [&](std::size_t i) {
+        // One turn around each vertex: its faces, and its edges with the vertex across each, in the
+        // circulator's order (the mesh's, not the threads': the same sums for any thread count).
+        const VertexHandle v{int(i)};
+        if (deleted(v)) return;
+        for (auto h = mesh.cvoh_begin(v); h.is_valid(); ++h) {
+            const FaceHandle f = mesh.face_handle(*h);
+            if (f.is_valid()) normal[i] += faceNormal[f.idx()];
+            const double w = riemannian ? edgeWeight[mesh.edge_handle(*h).idx()] : 1.0;
+            neighbourSum[i] += w * position(mesh, mesh.to_vertex_handle(*h));
+            weightSum[i] += w;
         }
     });
 
