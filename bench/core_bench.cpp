@@ -13,14 +13,11 @@
 //    topology.
 // Prints one table per part; --quick runs a small subset (CI, through ctest: it fails only when a
 // run does not end as one converged genus-0 surface; times are printed, never checked).
+#include "contour_metric.h"
 #include "riemesh/evolution.h"
 #include "riemesh/primitives.h"
 #include "riemesh/self_intersection.h"
 #include "riemesh/threads.h"
-
-#include <memory>
-
-#include <nanovdb/util/GridBuilder.h>
 
 #if __has_include(<valgrind/callgrind.h>)
 #include <valgrind/callgrind.h>
@@ -36,6 +33,8 @@
 #include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <functional>
+#include <memory>
 #include <string>
 #include <vector>
 
@@ -83,47 +82,12 @@ FunctionImage fog(const Scene& s)
                          });
 }
 
-/// A stand-in for the structure-tensor metric, sampled on a sparse NanoVDB grid like the one
-/// vdb2mesh exports (same NanoMetric code path): within a few voxels of the surface, lengths
-/// across the contour (along the sdf gradient) are multiplied by up to sqrt(muMax).
-struct MetricGrids {
-    nanovdb::GridHandle<> diag, off;
-    std::unique_ptr<NanoMetric> metric;
-};
+using fixtures::ContourMetric;
 
-MetricGrids contourMetric(const std::function<double(const Vec3&)>& sdf, const Box3& bounds, double muMax)
+/// The contour metric of the bench's scenes: a Gaussian band of sigma 3 voxels around the surface.
+ContourMetric contourMetric(const std::function<double(const Vec3&)>& sdf, const Box3& bounds, double muMax)
 {
-    auto tensor = [&](const nanovdb::Coord& ijk) {
-        const Vec3 x(ijk[0], ijk[1], ijk[2]);
-        const double d = sdf(x);
-        const double w = std::exp(-d * d / 18.0); // Gaussian band, sigma 3 voxels
-        if (w < 1e-3) return Mat3(Mat3::Identity());
-        Vec3 g;
-        for (int a = 0; a < 3; ++a) {
-            Vec3 e = Vec3::Zero();
-            e[a] = 0.5;
-            g[a] = sdf(x + e) - sdf(x - e);
-        }
-        if (!(g.norm() > 0)) return Mat3(Mat3::Identity());
-        g.normalize();
-        return Mat3(Mat3::Identity() + (muMax - 1.0) * w * g * g.transpose());
-    };
-    const nanovdb::CoordBBox box(nanovdb::Coord(int(bounds.min().x()), int(bounds.min().y()), int(bounds.min().z())),
-                                 nanovdb::Coord(int(bounds.max().x()), int(bounds.max().y()), int(bounds.max().z())));
-    nanovdb::GridBuilder<nanovdb::Vec3f> diag(nanovdb::Vec3f(1, 1, 1)), off(nanovdb::Vec3f(0, 0, 0));
-    diag([&](const nanovdb::Coord& ijk) {
-        const Mat3 g = tensor(ijk);
-        return nanovdb::Vec3f(float(g(0, 0)), float(g(1, 1)), float(g(2, 2)));
-    }, box);
-    off([&](const nanovdb::Coord& ijk) {
-        const Mat3 g = tensor(ijk);
-        return nanovdb::Vec3f(float(g(0, 1)), float(g(0, 2)), float(g(1, 2)));
-    }, box);
-    MetricGrids grids;
-    grids.diag = diag.getHandle<>(1.0, nanovdb::Vec3d(0), kMetricDiagGrid);
-    grids.off = off.getHandle<>(1.0, nanovdb::Vec3d(0), kMetricOffGrid);
-    grids.metric = std::make_unique<NanoMetric>(grids.diag.grid<nanovdb::Vec3f>(), grids.off.grid<nanovdb::Vec3f>(), muMax);
-    return grids;
+    return fixtures::contourMetric(sdf, bounds, muMax, 3.0);
 }
 
 double now()
@@ -275,7 +239,7 @@ void parallelScaling(bool quick)
     std::printf("%8s %-11s %9s %9s %9s %8s %6s   %-34s %-34s\n", "target", "metric", "vertices", "ms 1T", "ms 2T", "speedup", "cores",
                 "1T: forces integr regul collis topol", "2T: forces integr regul collis topol");
     const auto ball = [](const Vec3& x) { return ballSdf(x, Vec3::Zero(), 30); };
-    MetricGrids contour = contourMetric(ball, Box3(Vec3::Constant(-40), Vec3::Constant(40)), 4.0);
+    ContourMetric contour = contourMetric(ball, Box3(Vec3::Constant(-40), Vec3::Constant(40)), 4.0);
     EuclideanMetric euclidean;
     const std::vector<int> targets = quick ? std::vector<int>{5000} : std::vector<int>{20000, 80000};
     for (int riemannian = 0; riemannian < 2; ++riemannian) {
@@ -428,7 +392,7 @@ int fullRuns(bool quick)
                     o.delta = riemannian ? 3.0 * scale : 1.5 * scale;
                     o.maxIterations = 3000;
                     EuclideanMetric euclidean;
-                    MetricGrids contour;
+                    ContourMetric contour;
                     if (riemannian) contour = contourMetric(s.sdf, s.bounds, 4.0);
                     const MetricField& metric = riemannian ? static_cast<const MetricField&>(*contour.metric) : euclidean;
                     Mesh mesh = makeInitialBox(image, 2.0 * o.delta);

@@ -3,6 +3,7 @@
 // tube, a thin plate under a coarse Euclidean and an anisotropic metric, NanoVDB image and metric)
 // evolves once per thread count; the vertex positions (compared as bytes), the faces and every
 // iteration's statistics must match, and the invariants hold at every tenth iteration.
+#include "contour_metric.h"
 #include "mesh_invariants.h"
 #include "riemesh/collision.h"
 #include "riemesh/evolution.h"
@@ -26,6 +27,8 @@ using namespace riemesh;
 namespace {
 
 using fixtures::ballSdf;
+using fixtures::ContourMetric;
+using fixtures::contourMetric;
 using fixtures::fogImage;
 using fixtures::torusSdf;
 
@@ -152,47 +155,6 @@ NanoScene nanoImage(const std::function<double(const Vec3&)>& f, const Box3& bou
     return s;
 }
 
-/// A NanoVDB metric stretching lengths across the contour of `sdf` by up to sqrt(muMax) (the
-/// grids core_bench and vdb2mesh feed NanoMetric).
-struct NanoMetricGrids {
-    nanovdb::GridHandle<> diag, off;
-    std::unique_ptr<NanoMetric> metric;
-};
-
-NanoMetricGrids contourMetric(const std::function<double(const Vec3&)>& sdf, const Box3& bounds, double muMax)
-{
-    auto tensor = [&](const nanovdb::Coord& ijk) {
-        const Vec3 x(ijk[0], ijk[1], ijk[2]);
-        const double d = sdf(x);
-        const double w = std::exp(-d * d / 8.0);
-        if (w < 1e-3) return Mat3(Mat3::Identity());
-        Vec3 g;
-        for (int a = 0; a < 3; ++a) {
-            Vec3 e = Vec3::Zero();
-            e[a] = 0.5;
-            g[a] = sdf(x + e) - sdf(x - e);
-        }
-        if (!(g.norm() > 0)) return Mat3(Mat3::Identity());
-        g.normalize();
-        return Mat3(Mat3::Identity() + (muMax - 1.0) * w * g * g.transpose());
-    };
-    const nanovdb::CoordBBox box(nanovdb::Coord(int(bounds.min().x()), int(bounds.min().y()), int(bounds.min().z())),
-                                 nanovdb::Coord(int(bounds.max().x()), int(bounds.max().y()), int(bounds.max().z())));
-    nanovdb::GridBuilder<nanovdb::Vec3f> diag(nanovdb::Vec3f(1, 1, 1)), off(nanovdb::Vec3f(0, 0, 0));
-    diag([&](const nanovdb::Coord& ijk) {
-        const Mat3 g = tensor(ijk);
-        return nanovdb::Vec3f(float(g(0, 0)), float(g(1, 1)), float(g(2, 2)));
-    }, box);
-    off([&](const nanovdb::Coord& ijk) {
-        const Mat3 g = tensor(ijk);
-        return nanovdb::Vec3f(float(g(0, 1)), float(g(0, 2)), float(g(1, 2)));
-    }, box);
-    NanoMetricGrids grids;
-    grids.diag = diag.getHandle<>(1.0, nanovdb::Vec3d(0), kMetricDiagGrid);
-    grids.off = off.getHandle<>(1.0, nanovdb::Vec3d(0), kMetricOffGrid);
-    grids.metric = std::make_unique<NanoMetric>(grids.diag.grid<nanovdb::Vec3f>(), grids.off.grid<nanovdb::Vec3f>(), muMax);
-    return grids;
-}
 
 } // namespace
 
@@ -286,7 +248,7 @@ TEST_CASE("parallel: a NanoVDB image and contour metric give the same mesh on 1 
     auto sdf = [](const Vec3& x) { return ballSdf(x, Vec3(16, 16, 16), 10); };
     const Box3 bounds(Vec3::Zero(), Vec3::Constant(32));
     const NanoScene scene = nanoImage([&](const Vec3& x) { return 0.5 + 0.5 * std::tanh(sdf(x)); }, bounds);
-    const NanoMetricGrids grids = contourMetric(sdf, bounds, 4.0);
+    const ContourMetric grids = contourMetric(sdf, bounds, 4.0, 2.0);
     const Outcome o = checkSameForOneAndTwoThreads(makeInitialBox(*scene.image, 2.4), *scene.image, *grids.metric,
                                                    baseOptions(1.2));
     CHECK(o.points.size() > 500);
