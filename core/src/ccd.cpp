@@ -62,6 +62,26 @@ CcdResult additiveCcd(std::array<Vec3, 4> x, std::array<Vec3, 4> d, int split, d
     return {true, t};
 }
 
+/// The vertex indices of face f, in its halfedge order.
+std::array<int, 3> faceIds(const Mesh& mesh, FaceHandle f)
+{
+    const HalfedgeHandle h = mesh.halfedge_handle(f);
+    return {mesh.from_vertex_handle(h).idx(), mesh.to_vertex_handle(h).idx(),
+            mesh.to_vertex_handle(mesh.next_halfedge_handle(h)).idx()};
+}
+
+/// The vertex indices of every live face and edge, in index order.
+void collectPrimitives(const Mesh& mesh, std::vector<std::array<int, 3>>& faces, std::vector<std::array<int, 2>>& edges)
+{
+    faces.clear();
+    for (auto f : mesh.faces()) faces.push_back(faceIds(mesh, f));
+    edges.clear();
+    for (auto e : mesh.edges()) {
+        const HalfedgeHandle h = mesh.halfedge_handle(e, 0);
+        edges.push_back({mesh.from_vertex_handle(h).idx(), mesh.to_vertex_handle(h).idx()});
+    }
+}
+
 /// Queries per chunk of the broad phase (see findInChunks).
 constexpr std::size_t kQueryChunk = 512;
 
@@ -192,30 +212,29 @@ SafeStepStats limitStepToCollisionFree(Mesh& mesh, const std::vector<Vec3>& star
     static thread_local Scratch scratch;
     std::vector<Vec3>& end = scratch.end;
     std::vector<char>& moves = scratch.moves;
+    // How far each live vertex moves: a pair whose distance at the start exceeds eta by more than
+    // the longest motions of both primitives together cannot come within eta however its
+    // vertices' motions are shortened: it is never stored (most pairs: most vertices barely move).
+    std::vector<double>& reach = scratch.reach;
+    std::vector<int>& live = scratch.live;
     end.resize(n);
     moves.assign(n, 0);
+    reach.assign(n, 0.0);
+    live.clear();
     bool any = false;
     for (auto v : mesh.vertices()) {
         const std::size_t i = std::size_t(v.idx());
+        live.push_back(v.idx());
         end[i] = position(mesh, v);
         moves[i] = end[i] != start[i];
+        if (moves[i]) reach[i] = (end[i] - start[i]).norm();
         any = any || moves[i];
     }
     if (!any) return stats;
 
     std::vector<std::array<int, 3>>& faces = scratch.faces;
-    faces.clear();
-    for (auto f : mesh.faces()) {
-        const HalfedgeHandle h = mesh.halfedge_handle(f);
-        faces.push_back({mesh.from_vertex_handle(h).idx(), mesh.to_vertex_handle(h).idx(),
-                         mesh.to_vertex_handle(mesh.next_halfedge_handle(h)).idx()});
-    }
     std::vector<std::array<int, 2>>& edges = scratch.edges;
-    edges.clear();
-    for (auto e : mesh.edges()) {
-        const HalfedgeHandle h = mesh.halfedge_handle(e, 0);
-        edges.push_back({mesh.from_vertex_handle(h).idx(), mesh.to_vertex_handle(h).idx()});
-    }
+    collectPrimitives(mesh, faces, edges);
     auto sweep = [&](Box6& b, int v) {
         const Vec3& s = start[std::size_t(v)];
         const Vec3& e = end[std::size_t(v)];
@@ -245,18 +264,6 @@ SafeStepStats limitStepToCollisionFree(Mesh& mesh, const std::vector<Vec3>& star
         int kind; ///< 0: vertex a against face b; 1: edge a against edge b
         int a, b;
     };
-    // A pair whose distance at the start exceeds eta by more than the longest motions of both
-    // primitives together cannot come within eta however its vertices' motions are shortened:
-    // it is never stored (most pairs, since most vertices barely move).
-    std::vector<double>& reach = scratch.reach;
-    reach.assign(n, 0.0);
-    std::vector<int>& live = scratch.live;
-    live.clear();
-    for (auto v : mesh.vertices()) {
-        const std::size_t i = std::size_t(v.idx());
-        live.push_back(v.idx());
-        if (moves[i]) reach[i] = (end[i] - start[i]).norm();
-    }
     auto outOfReach = [&](double distanceSquared, double motion) {
         const double r = motion + eta;
         return distanceSquared > r * r * 1.0000001;
@@ -419,9 +426,7 @@ bool facesMeetMesh(const Mesh& mesh, const std::vector<FaceHandle>& faces, doubl
     };
     auto makeFace = [&](FaceHandle f) {
         Face x;
-        const HalfedgeHandle h = mesh.halfedge_handle(f);
-        x.ids = {mesh.from_vertex_handle(h).idx(), mesh.to_vertex_handle(h).idx(),
-                 mesh.to_vertex_handle(mesh.next_halfedge_handle(h)).idx()};
+        x.ids = faceIds(mesh, f);
         const double* p[3];
         for (int i = 0; i < 3; ++i) {
             p[i] = mesh.point(VertexHandle(x.ids[std::size_t(i)])).data();
@@ -472,15 +477,7 @@ double minimumSeparation(const Mesh& mesh, double radius)
     detail::BoxGrid grid;
     std::vector<std::array<int, 3>> faces;
     std::vector<std::array<int, 2>> edges;
-    for (auto f : mesh.faces()) {
-        const HalfedgeHandle h = mesh.halfedge_handle(f);
-        faces.push_back({mesh.from_vertex_handle(h).idx(), mesh.to_vertex_handle(h).idx(),
-                         mesh.to_vertex_handle(mesh.next_halfedge_handle(h)).idx()});
-    }
-    for (auto e : mesh.edges()) {
-        const HalfedgeHandle h = mesh.halfedge_handle(e, 0);
-        edges.push_back({mesh.from_vertex_handle(h).idx(), mesh.to_vertex_handle(h).idx()});
-    }
+    collectPrimitives(mesh, faces, edges);
     auto boxOf = [&](const int* v, int k) {
         Box6 b = {1e300, 1e300, 1e300, -1e300, -1e300, -1e300};
         for (int i = 0; i < k; ++i)
