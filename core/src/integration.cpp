@@ -26,13 +26,22 @@ IntegrationStats integrate(Mesh& mesh, const std::vector<Vec3>& forces, const In
     const double invMass = 1.0 / options.mass;
     // Every vertex in parallel (each writes only its own properties); its kinetic energy goes to a
     // per-vertex array summed in index order afterwards, so the mean is the same for any thread count.
+    // The arrays are kept between calls (no allocation per iteration); plain pointers from here on:
+    // a thread_local named inside a parallel body would be the worker's own.
     const std::size_t n = mesh.n_vertices();
-    std::vector<double> vertexEnergy(n, 0.0), maxStep(n, 0.0);
-    std::vector<char> counted(n, 0), moving(n, 0);
+    static thread_local std::vector<double> energyBuffer, stepBuffer;
+    static thread_local std::vector<char> movingBuffer;
+    energyBuffer.resize(n);
+    stepBuffer.resize(n);
+    movingBuffer.resize(n);
+    double* const vertexEnergy = energyBuffer.data();
+    double* const maxStep = stepBuffer.data();
+    char* const moving = movingBuffer.data();
     const bool vertexStatus = mesh.has_vertex_status();
+    auto deleted = [&](std::size_t i) { return vertexStatus && mesh.status(VertexHandle(int(i))).deleted(); };
     detail::parallelFor(0, n, kGrain, [&](std::size_t i) {
         const VertexHandle v{int(i)};
-        if (vertexStatus && mesh.status(v).deleted()) return;
+        if (deleted(i)) return;
         const auto& vel = mesh.property(velocity, v);
         Vec3 u(vel[0], vel[1], vel[2]);
         const Vec3& f = forces[v.idx()];
@@ -71,12 +80,11 @@ IntegrationStats integrate(Mesh& mesh, const std::vector<Vec3>& forces, const In
         m.y = keep * m.y + (1 - keep) * d.y();
         m.z = keep * m.z + (1 - keep) * d.z();
         moving[i] = m.x * m.x + m.y * m.y + m.z * m.z > options.movingSpeed * options.movingSpeed;
-        counted[i] = 1;
     });
     double energy = 0;
     std::size_t count = 0;
     for (std::size_t i = 0; i < n; ++i) {
-        if (!counted[i]) continue;
+        if (deleted(i)) continue;
         energy += vertexEnergy[i];
         stats.maxDisplacement = std::max(stats.maxDisplacement, maxStep[i]);
         stats.moving += std::size_t(moving[i]);
