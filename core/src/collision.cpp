@@ -313,17 +313,21 @@ std::vector<CollisionPair> findCollisions(const Mesh& mesh, const MetricField& m
     char* const verdict = S.verdict.data();
     detail::parallelFor(0, sources.size() - 1, 8, [&](std::size_t g) {
         thread_local detail::BoundedPathSearch search;
+        thread_local std::vector<int> targets;
         const std::size_t end = sources[g + 1];
         bool searched = false;
         for (std::size_t k = sources[g]; k < end; ++k) {
             const Candidate& c = candidates[k];
             if (c.crease && closeByTwoEdges(c.u, c.w, detourLimit(c))) continue;
-            if (!searched) {
+            if (!searched) { // up to the farthest this source's candidates ask, or until all are settled
                 searched = true;
                 double bound = 0;
-                for (std::size_t j = k; j < end && bound < pathBound; ++j)
+                targets.clear();
+                for (std::size_t j = k; j < end; ++j) {
                     bound = std::max(bound, candidates[j].crease ? detourLimit(candidates[j]) : pathBound);
-                search.run(mesh, VertexHandle(c.u), std::min(bound, pathBound));
+                    targets.push_back(candidates[j].w);
+                }
+                search.runUntil(mesh, VertexHandle(c.u), std::min(bound, pathBound), targets.data(), targets.size());
             }
             // Close along the mesh: a short edge path that is no detour around a gap.
             const bool reached = search.reached(VertexHandle(c.w));

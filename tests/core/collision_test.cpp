@@ -1,3 +1,4 @@
+#include "../../core/src/detail/mesh_walk.h" // private to the core: included by path
 #include "mesh_invariants.h"
 #include "riemesh/collision.h"
 #include "riemesh/primitives.h"
@@ -468,4 +469,44 @@ TEST_CASE("collision: near a merge, two sheets joined by a detour around a rim a
     INFO("across pairs: untagged " << plain << ", near a merge " << tagged);
     CHECK(tagged > plain);
     CHECK(tagged > 100);
+}
+
+TEST_CASE("bounded path search: stopping at the targets gives the targets' full-run answers")
+{
+    // runUntil stops once its targets are settled (findCollisions' exclusion of pairs close along
+    // the mesh); reached() and distance() of every target must be the full run's, bit for bit.
+    const Mesh torus = makeRegularTorus(Vec3(0, 0, 0), 4.0, 1.5, 0.6);
+    const int n = int(torus.n_vertices());
+    std::mt19937 rng(7);
+    std::uniform_int_distribution<int> pick(0, n - 1);
+    detail::BoundedPathSearch full, early;
+    int partial = 0; // runs that stopped before the full run's last settled vertex
+    for (int trial = 0; trial < 200; ++trial) {
+        const VertexHandle source(pick(rng));
+        const double bound = 1.0 + 0.1 * (trial % 60);
+        const std::vector<VertexHandle> reached = full.run(torus, source, bound);
+        const std::size_t settled = reached.size();
+        // Targets among the reached vertices (what findCollisions mostly asks), and every third
+        // trial one anywhere (perhaps beyond the bound: then the search runs to the end).
+        std::vector<int> targets;
+        std::uniform_int_distribution<std::size_t> among(0, settled - 1);
+        for (int k = 0; k < 1 + trial % 5; ++k) {
+            const int t = trial % 3 == 0 && k == 0 ? pick(rng) : reached[among(rng)].idx();
+            if (t != source.idx() && std::find(targets.begin(), targets.end(), t) == targets.end()) targets.push_back(t);
+        }
+        early.runUntil(torus, source, bound, targets.data(), targets.size());
+        bool allReached = true;
+        for (int t : targets) {
+            const VertexHandle v(t);
+            CHECK(early.reached(v) == full.reached(v));
+            if (full.reached(v)) CHECK(early.distance(v) == full.distance(v));
+            allReached = allReached && full.reached(v);
+        }
+        // With every target reached the search may stop early: count the runs that did (the test
+        // would see nothing if runUntil always ran to the bound).
+        std::size_t earlyCount = 0;
+        for (auto v : torus.vertices()) earlyCount += early.reached(v);
+        partial += allReached && earlyCount < settled;
+    }
+    CHECK(partial > 50);
 }

@@ -7,6 +7,19 @@ namespace riemesh::detail {
 
 const std::vector<VertexHandle>& BoundedPathSearch::run(const Mesh& mesh, VertexHandle source, double maxLength)
 {
+    search(mesh, source, maxLength, nullptr, 0);
+    return mReached;
+}
+
+void BoundedPathSearch::runUntil(const Mesh& mesh, VertexHandle source, double maxLength, const int* targets,
+                                 std::size_t count)
+{
+    search(mesh, source, maxLength, targets, count);
+}
+
+void BoundedPathSearch::search(const Mesh& mesh, VertexHandle source, double maxLength, const int* targets,
+                               std::size_t count)
+{
     const std::size_t n = mesh.n_vertices();
     if (mStamp.size() < n) {
         mStamp.resize(n, 0);
@@ -15,6 +28,7 @@ const std::vector<VertexHandle>& BoundedPathSearch::run(const Mesh& mesh, Vertex
     }
     if (++mCurrent == 0) { // wrapped around: reset every stamp once
         std::fill(mStamp.begin(), mStamp.end(), 0u);
+        std::fill(mTarget.begin(), mTarget.end(), 0u);
         mCurrent = 1;
     }
     mReached.clear();
@@ -32,6 +46,11 @@ const std::vector<VertexHandle>& BoundedPathSearch::run(const Mesh& mesh, Vertex
         }
         return false;
     };
+    // The targets are marked with the stamp of the search after this one: a settled target meets
+    // its mark first (the stamp is only compared for equality with the current one).
+    if (count > 0 && mTarget.size() < n) mTarget.resize(n, 0);
+    for (std::size_t k = 0; k < count; ++k) mTarget[std::size_t(targets[k])] = mCurrent;
+    std::size_t targetsLeft = count;
     const auto later = std::greater<std::pair<double, int>>();
     touch(source.idx(), 0.0);
     mHeap.emplace_back(0.0, source.idx());
@@ -43,6 +62,10 @@ const std::vector<VertexHandle>& BoundedPathSearch::run(const Mesh& mesh, Vertex
         mSettled[i] = 1;
         const VertexHandle v(i);
         mReached.push_back(v);
+        if (targetsLeft > 0 && mTarget[std::size_t(i)] == mCurrent) {
+            mTarget[std::size_t(i)] = 0;
+            if (--targetsLeft == 0) break;
+        }
         const Mesh::Point& p = mesh.point(v);
         for (auto h : mesh.voh_range(v)) {
             const VertexHandle w = mesh.to_vertex_handle(h);
@@ -55,7 +78,6 @@ const std::vector<VertexHandle>& BoundedPathSearch::run(const Mesh& mesh, Vertex
             }
         }
     }
-    return mReached;
 }
 
 bool BoundedPathSearch::isWithin(const Mesh& mesh, VertexHandle from, VertexHandle to, double maxLength)

@@ -20,6 +20,11 @@ public:
     /// length from `source` is <= maxLength (world units). Returns the settled vertices.
     const std::vector<VertexHandle>& run(const Mesh& mesh, VertexHandle source, double maxLength);
 
+    /// The same, stopping as soon as every one of the `count` vertices `targets` (distinct vertex
+    /// indices) is settled: what reached() and distance() say of the targets is what the full run
+    /// would say (settled distances are final), of other vertices not.
+    void runUntil(const Mesh& mesh, VertexHandle source, double maxLength, const int* targets, std::size_t count);
+
     /// True when `v` was settled by the last run (its path length is <= the bound).
     bool reached(VertexHandle v) const
     {
@@ -33,7 +38,9 @@ public:
     bool isWithin(const Mesh& mesh, VertexHandle from, VertexHandle to, double maxLength);
 
 private:
-    std::vector<unsigned> mStamp;
+    void search(const Mesh& mesh, VertexHandle source, double maxLength, const int* targets, std::size_t count);
+
+    std::vector<unsigned> mStamp, mTarget;
     std::vector<double> mDistance;
     std::vector<char> mSettled;
     std::vector<std::pair<double, int>> mHeap;
