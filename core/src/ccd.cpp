@@ -85,23 +85,6 @@ void collectPrimitives(const Mesh& mesh, std::vector<std::array<int, 3>>& faces,
 /// Queries per chunk of the broad phase (see findInChunks).
 constexpr std::size_t kQueryChunk = 512;
 
-/// Runs query(i, found) for i in [0, count) in parallel, in fixed chunks of kQueryChunk indices,
-/// each appending to its own list; the lists are then appended to `out` in chunk order, so that
-/// `out` is the same, in the same order, for any thread count.
-template <class Query>
-void findInChunks(std::size_t count, std::vector<std::vector<std::array<int, 3>>>& lists,
-                  std::vector<std::array<int, 3>>& out, Query&& query)
-{
-    const std::size_t chunks = (count + kQueryChunk - 1) / kQueryChunk;
-    if (lists.size() < chunks) lists.resize(chunks);
-    detail::parallelFor(0, chunks, 1, [&](std::size_t c) {
-        std::vector<std::array<int, 3>>& found = lists[c];
-        found.clear();
-        for (std::size_t i = c * kQueryChunk, e = std::min(count, i + kQueryChunk); i < e; ++i) query(i, found);
-    });
-    for (std::size_t c = 0; c < chunks; ++c) out.insert(out.end(), lists[c].begin(), lists[c].end());
-}
-
 } // namespace
 
 double pointTriangleDistanceSquared(const Vec3& p, const Vec3& a, const Vec3& b, const Vec3& c)
@@ -189,7 +172,409 @@ CcdResult edgeEdgeCcd(const Vec3& p0, const Vec3& q0, const Vec3& r0, const Vec3
                        });
 }
 
-SafeStepStats limitStepToCollisionFree(Mesh& mesh, const std::vector<Vec3>& start, const SafeStepOptions& options)
+namespace {
+
+/// A candidate pair of the step: kind (0: vertex v[0] against face (v[1], v[2], v[3]); 1: edge
+/// (v[0], v[1]) against edge (v[2], v[3])), then the four vertex indices.
+using Quad = std::array<int, 5>;
+
+/// What the pair tests of one step need: the positions at its start and end, how far each vertex
+/// moves, and the minimal separation.
+struct StepGeometry {
+    const std::vector<Vec3>& start;
+    const std::vector<Vec3>& end;
+    const std::vector<double>& reach;
+    double eta;
+
+    /// The box swept by the k vertices v from start to end, grown by r.
+    Box6 sweep(const int* v, int k, double r) const
+    {
+        constexpr double inf = std::numeric_limits<double>::infinity();
+        Box6 b = {inf, inf, inf, -inf, -inf, -inf};
+        for (int i = 0; i < k; ++i) {
+            const Vec3& s = start[std::size_t(v[i])];
+            const Vec3& e = end[std::size_t(v[i])];
+            for (int c = 0; c < 3; ++c) {
+                b[c] = std::min({b[c], s[c], e[c]});
+                b[c + 3] = std::max({b[c + 3], s[c], e[c]});
+            }
+        }
+        for (int c = 0; c < 3; ++c) b[c] -= r, b[c + 3] += r;
+        return b;
+    }
+    Box6 vertexBox(int i) const { return sweep(&i, 1, 0.0); }
+    Box6 faceBox(const std::array<int, 3>& t) const { return sweep(t.data(), 3, eta); }
+    Box6 edgeBox(const std::array<int, 2>& x) const { return sweep(x.data(), 2, 0.5 * eta); }
+
+    bool outOfReach(double distanceSquared, double motion) const
+    {
+        const double r = motion + eta;
+        return distanceSquared > r * r * 1.0000001;
+    }
+    /// Can vertex i come within eta of face t during the step (i not a corner of t)? A pair whose
+    /// distance at the start exceeds eta by more than the longest motions of both primitives
+    /// together cannot, however its vertices' motions are shortened (most pairs: most vertices
+    /// barely move).
+    bool vertexFace(int i, const std::array<int, 3>& t) const
+    {
+        const double motion = reach[std::size_t(i)] + std::max({reach[std::size_t(t[0])], reach[std::size_t(t[1])],
+                                                                 reach[std::size_t(t[2])]});
+        if (motion == 0) return false;
+        // A cheap lower bound first: the distance to the centroid less the farthest corner's.
+        const Vec3& p = start[std::size_t(i)];
+        const Vec3& a = start[std::size_t(t[0])];
+        const Vec3& b = start[std::size_t(t[1])];
+        const Vec3& c = start[std::size_t(t[2])];
+        const Vec3 centroid = (a + b + c) / 3.0;
+        const double radius = std::sqrt(std::max({(a - centroid).squaredNorm(), (b - centroid).squaredNorm(),
+                                                  (c - centroid).squaredNorm()}));
+        if ((p - centroid).norm() - radius > (motion + eta) * 1.0000001) return false;
+        return !outOfReach(pointTriangleDistanceSquared(p, a, b, c), motion);
+    }
+    /// The same for edges x and y (sharing no vertex).
+    bool edgeEdge(const std::array<int, 2>& x, const std::array<int, 2>& y) const
+    {
+        const double motion = std::max(reach[std::size_t(x[0])], reach[std::size_t(x[1])]) +
+                              std::max(reach[std::size_t(y[0])], reach[std::size_t(y[1])]);
+        if (motion == 0) return false;
+        // A cheap lower bound first: the midpoints' distance less the half lengths.
+        const Vec3& a0 = start[std::size_t(x[0])];
+        const Vec3& a1 = start[std::size_t(x[1])];
+        const Vec3& b0 = start[std::size_t(y[0])];
+        const Vec3& b1 = start[std::size_t(y[1])];
+        const double bound = 0.5 * ((a0 + a1 - b0 - b1).norm() - (a1 - a0).norm() - (b1 - b0).norm());
+        if (bound > (motion + eta) * 1.0000001) return false;
+        return !outOfReach(segmentSegmentDistanceSquared(a0, a1, b0, b1), motion);
+    }
+};
+
+bool hasCorner(const std::array<int, 3>& t, int i) { return t[0] == i || t[1] == i || t[2] == i; }
+bool shareVertex(const std::array<int, 2>& x, const std::array<int, 2>& y)
+{
+    return x[0] == y[0] || x[0] == y[1] || x[1] == y[0] || x[1] == y[1];
+}
+Quad vertexFaceQuad(int i, const std::array<int, 3>& t) { return {0, i, t[0], t[1], t[2]}; }
+Quad edgeEdgeQuad(const std::array<int, 2>& x, const std::array<int, 2>& y) { return {1, x[0], x[1], y[0], y[1]}; }
+/// Edges e and h (indices) in index order, as the search from scratch pairs them: the narrow
+/// phase is symmetric in exact arithmetic only.
+Quad edgeEdgeQuad(const std::vector<std::array<int, 2>>& edges, std::size_t e, std::size_t h)
+{
+    return e < h ? edgeEdgeQuad(edges[e], edges[h]) : edgeEdgeQuad(edges[h], edges[e]);
+}
+
+/// Runs query(i, found) for i in [0, count) in parallel, in fixed chunks of kQueryChunk indices,
+/// each appending to its own list; the lists are then appended to `out` in chunk order, so that
+/// `out` is the same, in the same order, for any thread count.
+template <class T, class Query>
+void findInChunks(std::size_t count, std::vector<std::vector<T>>& lists, std::vector<T>& out, Query&& query)
+{
+    const std::size_t chunks = (count + kQueryChunk - 1) / kQueryChunk;
+    if (lists.size() < chunks) lists.resize(chunks);
+    detail::parallelFor(0, chunks, 1, [&](std::size_t c) {
+        std::vector<T>& found = lists[c];
+        found.clear();
+        for (std::size_t i = c * kQueryChunk, e = std::min(count, i + kQueryChunk); i < e; ++i) query(i, found);
+    });
+    for (std::size_t c = 0; c < chunks; ++c) out.insert(out.end(), lists[c].begin(), lists[c].end());
+}
+
+/// The broad phase of one step from scratch: every vertex-face and edge-edge pair whose swept
+/// boxes (the face's grown by eta, the edges' by eta / 2 each) overlap and that is within reach.
+void allCandidates(const StepGeometry& g, const std::vector<int>& live, const std::vector<std::array<int, 3>>& faces,
+                   const std::vector<std::array<int, 2>>& edges, double cell, std::vector<Box6>& faceBox,
+                   std::vector<Box6>& edgeBox, detail::PackedBoxGrid& grid, std::vector<std::vector<Quad>>& lists,
+                   std::vector<Quad>& candidates)
+{
+    faceBox.resize(faces.size());
+    for (std::size_t f = 0; f < faces.size(); ++f) faceBox[f] = g.faceBox(faces[f]);
+    grid.build(faceBox, cell);
+    findInChunks(live.size(), lists, candidates, [&](std::size_t k, std::vector<Quad>& found) {
+        const int i = live[k];
+        const Box6 b = g.vertexBox(i);
+        grid.query(b, [&](int f) {
+            const auto& t = faces[std::size_t(f)];
+            // (the grid's float boxes are a little larger: the exact boxes decide)
+            if (hasCorner(t, i) || !detail::boxesOverlap(b, faceBox[std::size_t(f)]) || !g.vertexFace(i, t)) return;
+            found.push_back(vertexFaceQuad(i, t));
+        });
+    });
+    edgeBox.resize(edges.size());
+    for (std::size_t e = 0; e < edges.size(); ++e) edgeBox[e] = g.edgeBox(edges[e]);
+    grid.build(edgeBox, cell);
+    findInChunks(edges.size(), lists, candidates, [&](std::size_t e, std::vector<Quad>& found) {
+        const auto& x = edges[e];
+        grid.query(edgeBox[e], [&](int h) { // each pair once: from its lower edge
+            const auto& y = edges[std::size_t(h)];
+            if (shareVertex(x, y) || !detail::boxesOverlap(edgeBox[e], edgeBox[std::size_t(h)]) || !g.edgeEdge(x, y))
+                return;
+            found.push_back(edgeEdgeQuad(x, y));
+        }, int(e));
+    });
+}
+
+} // namespace
+
+/// The pairs of the mesh within reach of each other at the last rebuild (positions "anchor"), and
+/// the grids of that time's primitives, grown so that they still cover every primitive whose
+/// vertices have moved less than half the skin since (see SafeStepCache in riemesh/ccd.h).
+struct SafeStepCache::Impl {
+    bool valid = false;
+    double skin = 0, grow = 0;
+    std::size_t vertices0 = 0, faces0 = 0, edges0 = 0; ///< element counts (with deleted ones) at the rebuild
+    std::vector<Vec3> anchor;                          ///< positions at the rebuild, by vertex index
+    std::vector<std::array<int, 3>> faceAt0;           ///< faces' corners at the rebuild, by face index
+    std::vector<std::array<int, 2>> edgeAt0;
+    std::vector<std::array<int, 3>> pairs; ///< (kind, a, b): vertex a - face b, or edge a - edge b (indices)
+    detail::PackedBoxGrid vertexGrid, faceGrid, edgeGrid;
+    std::vector<int> vertexOf, faceOf, edgeOf; ///< grid item -> element index
+    std::size_t rebuilds = 0;
+
+    // This step's state.
+    std::vector<std::array<int, 3>> faceNow; ///< corners by face index ({-1, -1, -1}: deleted)
+    std::vector<std::array<int, 2>> edgeNow;
+    std::vector<Box6> faceBox, edgeBox; ///< swept boxes by index (grown as in allCandidates)
+    std::vector<char> cleanV, cleanF, cleanE;
+    std::vector<int> dirtyV, dirtyF, dirtyE;
+    std::vector<Box6> dirtyBox;
+    detail::PackedBoxGrid dirtyGrid;
+    std::vector<std::vector<std::array<int, 3>>> pairLists;
+    std::vector<std::vector<Quad>> lists;
+
+    void candidates(const Mesh& mesh, const StepGeometry& g, double cell, const SafeStepOptions& options,
+                    std::vector<Quad>& out, SafeStepStats& stats);
+    void rebuild(const Mesh& mesh, const std::vector<Vec3>& start, double eta, double cell, double skinFraction);
+    void classify(const Mesh& mesh, const StepGeometry& g);
+    void collect(const StepGeometry& g, double cell, std::vector<Quad>& candidates);
+};
+
+SafeStepCache::SafeStepCache() : mImpl(std::make_unique<Impl>()) {}
+SafeStepCache::~SafeStepCache() = default;
+SafeStepCache::SafeStepCache(SafeStepCache&&) noexcept = default;
+SafeStepCache& SafeStepCache::operator=(SafeStepCache&&) noexcept = default;
+void SafeStepCache::invalidate() { mImpl->valid = false; }
+std::size_t SafeStepCache::rebuilds() const { return mImpl->rebuilds; }
+
+void SafeStepCache::Impl::candidates(const Mesh& mesh, const StepGeometry& g, double cell,
+                                     const SafeStepOptions& options, std::vector<Quad>& out, SafeStepStats& stats)
+{
+    faceNow.assign(mesh.n_faces(), {-1, -1, -1});
+    faceBox.resize(mesh.n_faces());
+    std::size_t liveFaces = 0, liveEdges = 0;
+    for (auto f : mesh.faces()) {
+        const std::size_t i = std::size_t(f.idx());
+        faceNow[i] = faceIds(mesh, f);
+        faceBox[i] = g.faceBox(faceNow[i]);
+        ++liveFaces;
+    }
+    edgeNow.assign(mesh.n_edges(), {-1, -1});
+    edgeBox.resize(mesh.n_edges());
+    for (auto e : mesh.edges()) {
+        const std::size_t i = std::size_t(e.idx());
+        const HalfedgeHandle h = mesh.halfedge_handle(e, 0);
+        edgeNow[i] = {mesh.from_vertex_handle(h).idx(), mesh.to_vertex_handle(h).idx()};
+        edgeBox[i] = g.edgeBox(edgeNow[i]);
+        ++liveEdges;
+    }
+    // First use, or renumbered (garbage collection: invalidate(), or noticed by the counts):
+    // anchor here. Otherwise anchor again when the primitives out of their skin are too many.
+    bool rebuilt = false;
+    if (!valid || mesh.n_vertices() < vertices0 || mesh.n_faces() < faces0 || mesh.n_edges() < edges0) {
+        rebuild(mesh, g.start, g.eta, cell, options.skin);
+        rebuilt = true;
+    }
+    classify(mesh, g);
+    if (!rebuilt && double(dirtyF.size() + dirtyE.size()) > options.rebuildFraction * double(liveFaces + liveEdges)) {
+        rebuild(mesh, g.start, g.eta, cell, options.skin);
+        classify(mesh, g);
+        rebuilt = true;
+    }
+    stats.rebuilt = rebuilt;
+    stats.dirty = dirtyF.size() + dirtyE.size();
+    collect(g, cell, out);
+}
+
+void SafeStepCache::Impl::rebuild(const Mesh& mesh, const std::vector<Vec3>& start, double eta, double cell,
+                                  double skinFraction)
+{
+    ++rebuilds;
+    valid = true;
+    skin = skinFraction * cell;
+    // A clean primitive (vertices within skin / 2 of their anchors at the start and the end of a
+    // step) lies within skin / 2 of its anchored box: grids grown by that cover its swept box grown
+    // by eta (as allCandidates grows it), and the pairs kept are those that could still come within
+    // reach: moving at most `skin` each in a step, after moving at most skin / 2 since the rebuild,
+    // two primitives farther apart than 3 skin + eta there never are (StepGeometry's tests).
+    grow = 1.5 * skin + eta;
+    const double keep = (3 * skin + eta) * 1.0001;
+    vertices0 = mesh.n_vertices();
+    faces0 = mesh.n_faces();
+    edges0 = mesh.n_edges();
+    anchor.assign(start.begin(), start.begin() + std::ptrdiff_t(vertices0));
+    faceAt0 = faceNow;
+    edgeAt0 = edgeNow;
+    auto boxAround = [&](const int* v, int k) {
+        constexpr double inf = std::numeric_limits<double>::infinity();
+        Box6 b = {inf, inf, inf, -inf, -inf, -inf};
+        for (int i = 0; i < k; ++i)
+            for (int c = 0; c < 3; ++c) {
+                b[c] = std::min(b[c], anchor[std::size_t(v[i])][c] - grow);
+                b[c + 3] = std::max(b[c + 3], anchor[std::size_t(v[i])][c] + grow);
+            }
+        return b;
+    };
+    std::vector<Box6>& boxes = dirtyBox; // (a buffer here)
+    vertexOf.clear();
+    boxes.clear();
+    for (auto v : mesh.vertices()) {
+        const int i = v.idx();
+        vertexOf.push_back(i);
+        boxes.push_back(boxAround(&i, 1));
+    }
+    vertexGrid.build(boxes, cell);
+    faceOf.clear();
+    boxes.clear();
+    for (std::size_t f = 0; f < faceAt0.size(); ++f)
+        if (faceAt0[f][0] >= 0) {
+            faceOf.push_back(int(f));
+            boxes.push_back(boxAround(faceAt0[f].data(), 3));
+        }
+    faceGrid.build(boxes, cell);
+    edgeOf.clear();
+    boxes.clear();
+    for (std::size_t e = 0; e < edgeAt0.size(); ++e)
+        if (edgeAt0[e][0] >= 0) {
+            edgeOf.push_back(int(e));
+            boxes.push_back(boxAround(edgeAt0[e].data(), 2));
+        }
+    edgeGrid.build(boxes, cell);
+    pairs.clear();
+    const double keep2 = keep * keep;
+    findInChunks(vertexOf.size(), pairLists, pairs, [&](std::size_t k, std::vector<std::array<int, 3>>& found) {
+        const int i = vertexOf[k];
+        const Vec3& p = anchor[std::size_t(i)];
+        faceGrid.query(boxAround(&i, 1), [&](int item) {
+            const int f = faceOf[std::size_t(item)];
+            const auto& t = faceAt0[std::size_t(f)];
+            if (hasCorner(t, i)) return;
+            if (pointTriangleDistanceSquared(p, anchor[std::size_t(t[0])], anchor[std::size_t(t[1])],
+                                             anchor[std::size_t(t[2])]) <= keep2)
+                found.push_back({0, i, f});
+        });
+    });
+    findInChunks(edgeOf.size(), pairLists, pairs, [&](std::size_t k, std::vector<std::array<int, 3>>& found) {
+        const int e = edgeOf[k];
+        const auto& x = edgeAt0[std::size_t(e)];
+        edgeGrid.query(boxAround(x.data(), 2), [&](int item) { // each pair once: from its lower item
+            const int h = edgeOf[std::size_t(item)];
+            const auto& y = edgeAt0[std::size_t(h)];
+            if (shareVertex(x, y)) return;
+            if (segmentSegmentDistanceSquared(anchor[std::size_t(x[0])], anchor[std::size_t(x[1])],
+                                              anchor[std::size_t(y[0])], anchor[std::size_t(y[1])]) <= keep2)
+                found.push_back({1, e, h});
+        }, int(k));
+    });
+}
+
+void SafeStepCache::Impl::classify(const Mesh& mesh, const StepGeometry& g)
+{
+    const double half2 = 0.25 * skin * skin;
+    cleanV.assign(mesh.n_vertices(), 0);
+    dirtyV.clear();
+    for (auto v : mesh.vertices()) {
+        const std::size_t i = std::size_t(v.idx());
+        cleanV[i] = i < vertices0 && (g.start[i] - anchor[i]).squaredNorm() <= half2 &&
+                    (g.end[i] - anchor[i]).squaredNorm() <= half2;
+        if (!cleanV[i]) dirtyV.push_back(int(i));
+    }
+    auto clean = [&](const int* v, int k) {
+        for (int i = 0; i < k; ++i)
+            if (!cleanV[std::size_t(v[i])]) return false;
+        return true;
+    };
+    cleanF.assign(faceNow.size(), 0);
+    dirtyF.clear();
+    for (std::size_t f = 0; f < faceNow.size(); ++f) {
+        if (faceNow[f][0] < 0) continue;
+        cleanF[f] = f < faces0 && faceNow[f] == faceAt0[f] && clean(faceNow[f].data(), 3);
+        if (!cleanF[f]) dirtyF.push_back(int(f));
+    }
+    cleanE.assign(edgeNow.size(), 0);
+    dirtyE.clear();
+    for (std::size_t e = 0; e < edgeNow.size(); ++e) {
+        if (edgeNow[e][0] < 0) continue;
+        cleanE[e] = e < edges0 && edgeNow[e] == edgeAt0[e] && clean(edgeNow[e].data(), 2);
+        if (!cleanE[e]) dirtyE.push_back(int(e));
+    }
+}
+
+void SafeStepCache::Impl::collect(const StepGeometry& g, double cell, std::vector<Quad>& candidates)
+{
+    // Clean against clean: the kept pairs.
+    findInChunks(pairs.size(), lists, candidates, [&](std::size_t k, std::vector<Quad>& found) {
+        const auto& p = pairs[k];
+        if (p[0] == 0) {
+            const std::size_t f = std::size_t(p[2]);
+            if (!cleanV[std::size_t(p[1])] || !cleanF[f]) return;
+            if (detail::boxesOverlap(g.vertexBox(p[1]), faceBox[f]) && g.vertexFace(p[1], faceNow[f]))
+                found.push_back(vertexFaceQuad(p[1], faceNow[f]));
+        } else {
+            const std::size_t a = std::size_t(p[1]), b = std::size_t(p[2]);
+            if (!cleanE[a] || !cleanE[b]) return;
+            if (detail::boxesOverlap(edgeBox[a], edgeBox[b]) && g.edgeEdge(edgeNow[a], edgeNow[b]))
+                found.push_back(edgeEdgeQuad(edgeNow, a, b));
+        }
+    });
+    // Dirty vertices against clean faces (the anchored grid) and dirty faces (a grid of this step).
+    dirtyBox.clear();
+    for (int f : dirtyF) dirtyBox.push_back(faceBox[std::size_t(f)]);
+    dirtyGrid.build(dirtyBox, cell);
+    findInChunks(dirtyV.size(), lists, candidates, [&](std::size_t k, std::vector<Quad>& found) {
+        const int i = dirtyV[k];
+        const Box6 b = g.vertexBox(i);
+        auto consider = [&](std::size_t f) {
+            const auto& t = faceNow[f];
+            if (!hasCorner(t, i) && detail::boxesOverlap(b, faceBox[f]) && g.vertexFace(i, t))
+                found.push_back(vertexFaceQuad(i, t));
+        };
+        faceGrid.query(b, [&](int item) {
+            const std::size_t f = std::size_t(faceOf[std::size_t(item)]);
+            if (f < cleanF.size() && cleanF[f]) consider(f);
+        });
+        dirtyGrid.query(b, [&](int item) { consider(std::size_t(dirtyF[std::size_t(item)])); });
+    });
+    // Clean vertices against dirty faces.
+    findInChunks(dirtyF.size(), lists, candidates, [&](std::size_t k, std::vector<Quad>& found) {
+        const std::size_t f = std::size_t(dirtyF[k]);
+        const auto& t = faceNow[f];
+        vertexGrid.query(faceBox[f], [&](int item) {
+            const int i = vertexOf[std::size_t(item)];
+            if (std::size_t(i) >= cleanV.size() || !cleanV[std::size_t(i)] || hasCorner(t, i)) return;
+            if (detail::boxesOverlap(g.vertexBox(i), faceBox[f]) && g.vertexFace(i, t)) found.push_back(vertexFaceQuad(i, t));
+        });
+    });
+    // Dirty edges against clean edges, and against dirty edges (each pair once).
+    dirtyBox.clear();
+    for (int e : dirtyE) dirtyBox.push_back(edgeBox[std::size_t(e)]);
+    dirtyGrid.build(dirtyBox, cell);
+    findInChunks(dirtyE.size(), lists, candidates, [&](std::size_t k, std::vector<Quad>& found) {
+        const std::size_t e = std::size_t(dirtyE[k]);
+        const auto& x = edgeNow[e];
+        auto consider = [&](std::size_t h) {
+            const auto& y = edgeNow[h];
+            if (!shareVertex(x, y) && detail::boxesOverlap(edgeBox[e], edgeBox[h]) &&
+                (e < h ? g.edgeEdge(x, y) : g.edgeEdge(y, x)))
+                found.push_back(edgeEdgeQuad(edgeNow, e, h));
+        };
+        edgeGrid.query(edgeBox[e], [&](int item) {
+            const std::size_t h = std::size_t(edgeOf[std::size_t(item)]);
+            if (h < cleanE.size() && cleanE[h]) consider(h);
+        });
+        dirtyGrid.query(edgeBox[e], [&](int item) { consider(std::size_t(dirtyE[std::size_t(item)])); }, int(k));
+    });
+}
+
+SafeStepStats limitStepToCollisionFree(Mesh& mesh, const std::vector<Vec3>& start, const SafeStepOptions& options,
+                                       SafeStepCache* cache)
 {
     SafeStepStats stats;
     const std::size_t n = mesh.n_vertices();
@@ -204,18 +589,15 @@ SafeStepStats limitStepToCollisionFree(Mesh& mesh, const std::vector<Vec3>& star
         std::vector<Box6> faceBox, edgeBox;
         std::vector<double> reach, alpha, factor;
         std::vector<int> touched;
-        std::vector<std::array<int, 3>> candidates;
-        std::vector<std::vector<std::array<int, 3>>> lists;
+        std::vector<Quad> candidates;
+        std::vector<std::vector<Quad>> lists;
         std::vector<int> live;
         detail::PackedBoxGrid grid;
     };
     static thread_local Scratch scratch;
     std::vector<Vec3>& end = scratch.end;
     std::vector<char>& moves = scratch.moves;
-    // How far each live vertex moves: a pair whose distance at the start exceeds eta by more than
-    // the longest motions of both primitives together cannot come within eta however its
-    // vertices' motions are shortened: it is never stored (most pairs: most vertices barely move).
-    std::vector<double>& reach = scratch.reach;
+    std::vector<double>& reach = scratch.reach; // how far each live vertex moves
     std::vector<int>& live = scratch.live;
     end.resize(n);
     moves.assign(n, 0);
@@ -231,99 +613,36 @@ SafeStepStats limitStepToCollisionFree(Mesh& mesh, const std::vector<Vec3>& star
         any = any || moves[i];
     }
     if (!any) return stats;
+    const StepGeometry g{start, end, reach, eta};
 
-    std::vector<std::array<int, 3>>& faces = scratch.faces;
-    std::vector<std::array<int, 2>>& edges = scratch.edges;
-    collectPrimitives(mesh, faces, edges);
-    auto sweep = [&](Box6& b, int v) {
-        const Vec3& s = start[std::size_t(v)];
-        const Vec3& e = end[std::size_t(v)];
-        for (int k = 0; k < 3; ++k) {
-            b[k] = std::min({b[k], s[k], e[k]});
-            b[k + 3] = std::max({b[k + 3], s[k], e[k]});
-        }
-    };
-    constexpr double inf = std::numeric_limits<double>::infinity();
-    auto grow = [](Box6& b, double r) {
-        for (int k = 0; k < 3; ++k) b[k] -= r, b[k + 3] += r;
-    };
-    std::vector<Box6>& faceBox = scratch.faceBox;
-    faceBox.resize(faces.size());
-    double extent = 0;
-    for (std::size_t f = 0; f < faces.size(); ++f) {
-        Box6 b = {inf, inf, inf, -inf, -inf, -inf};
-        for (int v : faces[f]) sweep(b, v);
-        grow(b, eta);
-        faceBox[f] = b;
-        extent += std::max({b[3] - b[0], b[4] - b[1], b[5] - b[2]});
-    }
-    if (faces.empty()) return stats;
-    const double cell = std::max(extent / double(faces.size()), 1e-9);
-
-    struct Candidate {
-        int kind; ///< 0: vertex a against face b; 1: edge a against edge b
-        int a, b;
-    };
-    auto outOfReach = [&](double distanceSquared, double motion) {
-        const double r = motion + eta;
-        return distanceSquared > r * r * 1.0000001;
-    };
-    std::vector<std::array<int, 3>>& candidates = scratch.candidates; // (kind, a, b), see Candidate
+    std::vector<Quad>& candidates = scratch.candidates;
     candidates.clear();
-    detail::PackedBoxGrid& grid = scratch.grid;
-    grid.build(faceBox, cell);
-    findInChunks(live.size(), scratch.lists, candidates, [&](std::size_t k, std::vector<std::array<int, 3>>& found) {
-        const int i = live[k];
-        Box6 b = {inf, inf, inf, -inf, -inf, -inf};
-        sweep(b, i);
-        grid.query(b, [&](int f) {
-            const auto& t = faces[std::size_t(f)];
-            if (t[0] == i || t[1] == i || t[2] == i) return;
-            const double motion = reach[std::size_t(i)] + std::max({reach[std::size_t(t[0])], reach[std::size_t(t[1])],
-                                                                     reach[std::size_t(t[2])]});
-            if (motion == 0) return;
-            // A cheap lower bound first: the distance to the centroid less the farthest corner's.
-            const Vec3& p = start[std::size_t(i)];
-            const Vec3& a = start[std::size_t(t[0])];
-            const Vec3& b = start[std::size_t(t[1])];
-            const Vec3& c = start[std::size_t(t[2])];
-            const Vec3 centroid = (a + b + c) / 3.0;
-            const double radius = std::sqrt(std::max({(a - centroid).squaredNorm(), (b - centroid).squaredNorm(),
-                                                      (c - centroid).squaredNorm()}));
-            if ((p - centroid).norm() - radius > (motion + eta) * 1.0000001) return;
-            if (outOfReach(pointTriangleDistanceSquared(p, a, b, c), motion)) return;
-            found.push_back({0, i, f});
-        });
-    });
-    std::vector<Box6>& edgeBox = scratch.edgeBox;
-    edgeBox.resize(edges.size());
-    for (std::size_t e = 0; e < edges.size(); ++e) {
-        Box6 b = {inf, inf, inf, -inf, -inf, -inf};
-        sweep(b, edges[e][0]);
-        sweep(b, edges[e][1]);
-        grow(b, 0.5 * eta);
-        edgeBox[e] = b;
+    // The grids' cells: the faces' mean extent (swept boxes of this step).
+    double extent = 0;
+    std::size_t faceCount = 0;
+    for (auto f : mesh.faces()) {
+        const std::array<int, 3> t = faceIds(mesh, f);
+        const Box6 b = g.faceBox(t);
+        extent += std::max({b[3] - b[0], b[4] - b[1], b[5] - b[2]});
+        ++faceCount;
     }
-    grid.build(edgeBox, cell);
-    findInChunks(edges.size(), scratch.lists, candidates, [&](std::size_t e, std::vector<std::array<int, 3>>& found) {
-        const auto& x = edges[e];
-        grid.query(edgeBox[e], [&](int g) { // each pair once: from its lower edge
-            const auto& y = edges[std::size_t(g)];
-            if (x[0] == y[0] || x[0] == y[1] || x[1] == y[0] || x[1] == y[1]) return;
-            const double motion = std::max(reach[std::size_t(x[0])], reach[std::size_t(x[1])]) +
-                                  std::max(reach[std::size_t(y[0])], reach[std::size_t(y[1])]);
-            if (motion == 0) return;
-            // A cheap lower bound first: the midpoints' distance less the half lengths.
-            const Vec3& a0 = start[std::size_t(x[0])];
-            const Vec3& a1 = start[std::size_t(x[1])];
-            const Vec3& b0 = start[std::size_t(y[0])];
-            const Vec3& b1 = start[std::size_t(y[1])];
-            const double bound = 0.5 * ((a0 + a1 - b0 - b1).norm() - (a1 - a0).norm() - (b1 - b0).norm());
-            if (bound > (motion + eta) * 1.0000001) return;
-            if (outOfReach(segmentSegmentDistanceSquared(a0, a1, b0, b1), motion)) return;
-            found.push_back({1, int(e), g});
-        }, int(e));
-    });
+    if (faceCount == 0) return stats;
+    const double cell = std::max(extent / double(faceCount), 1e-9);
+    // A step whose motions leave the skin of many vertices however they are anchored (a front
+    // travelling, a new level settling) is searched from scratch, and the pairs anchored later.
+    std::size_t far = 0;
+    if (cache) {
+        const double halfSkin = 0.5 * options.skin * cell;
+        for (int i : live) far += reach[std::size_t(i)] > halfSkin;
+    }
+    if (!cache || double(far) > 0.5 * options.rebuildFraction * double(live.size())) {
+        if (cache) cache->invalidate();
+        collectPrimitives(mesh, scratch.faces, scratch.edges);
+        allCandidates(g, live, scratch.faces, scratch.edges, cell, scratch.faceBox, scratch.edgeBox, scratch.grid,
+                      scratch.lists, candidates);
+    } else {
+        cache->impl().candidates(mesh, g, cell, options, candidates, stats);
+    }
     stats.candidates = candidates.size();
 
     // Rounds: test (again) the pairs with a vertex whose motion changed, shorten the colliding ones.
@@ -343,17 +662,8 @@ SafeStepStats limitStepToCollisionFree(Mesh& mesh, const std::vector<Vec3>& star
         stats.rounds = round + 1;
         bool hit = false;
         const double shorten = round < options.shortenRounds ? options.shorten : 0.0;
-        for (const auto& entry : candidates) {
-            const Candidate c{entry[0], entry[1], entry[2]};
-            std::array<int, 4> v;
-            if (c.kind == 0) {
-                const auto& t = faces[std::size_t(c.b)];
-                v = {c.a, t[0], t[1], t[2]};
-            } else {
-                const auto& x = edges[std::size_t(c.a)];
-                const auto& y = edges[std::size_t(c.b)];
-                v = {x[0], x[1], y[0], y[1]};
-            }
+        for (const Quad& c : candidates) {
+            const std::array<int, 4> v = {c[1], c[2], c[3], c[4]};
             if (!changed[std::size_t(v[0])] && !changed[std::size_t(v[1])] && !changed[std::size_t(v[2])] &&
                 !changed[std::size_t(v[3])])
                 continue;
@@ -362,8 +672,8 @@ SafeStepStats limitStepToCollisionFree(Mesh& mesh, const std::vector<Vec3>& star
             const Vec3& s2 = start[std::size_t(v[2])];
             const Vec3& s3 = start[std::size_t(v[3])];
             const CcdResult r =
-                c.kind == 0 ? pointTriangleCcd(s0, s1, s2, s3, at(v[0]), at(v[1]), at(v[2]), at(v[3]), eta, options.gapFraction)
-                            : edgeEdgeCcd(s0, s1, s2, s3, at(v[0]), at(v[1]), at(v[2]), at(v[3]), eta, options.gapFraction);
+                c[0] == 0 ? pointTriangleCcd(s0, s1, s2, s3, at(v[0]), at(v[1]), at(v[2]), at(v[3]), eta, options.gapFraction)
+                          : edgeEdgeCcd(s0, s1, s2, s3, at(v[0]), at(v[1]), at(v[2]), at(v[3]), eta, options.gapFraction);
             if (!r.collides) continue;
             hit = true;
             ++stats.collisions;

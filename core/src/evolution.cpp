@@ -207,7 +207,7 @@ IterationStats Evolution::step()
     if (o.intersectionFree) {
         SafeStepOptions so;
         so.minSeparation = o.minSeparation * o.delta;
-        limitStepToCollisionFree(mMesh, mStepStart, so);
+        limitStepToCollisionFree(mMesh, mStepStart, so, &mSafeStepCache);
     }
     vertexMetrics.update(); // every vertex that moved
     phase(it.phases.integration);
@@ -300,9 +300,11 @@ IterationStats Evolution::step()
     mChurn += std::size_t(rs.splits) + std::size_t(rs.collapses);
     if (o.renumber && live >= kRenumberMinVertices && mChurn > live / 8) {
         reorderForLocality(mMesh);
+        mSafeStepCache.invalidate();
         mChurn = 0;
     } else if (ts.merges || ts.cuts || removed || mMesh.n_vertices() - live > mMesh.n_vertices() / 20) {
         mMesh.garbage_collection();
+        mSafeStepCache.invalidate();
     }
 
     it.iteration = iteration;
@@ -346,6 +348,7 @@ void Evolution::updateConvergence()
     if (smallestComponent(mMesh) <= kCollapsedComponent) {
         mLevels.erase(mLevels.begin(), mLevels.begin() + mLevel + 1);
         mMesh = mInitialMesh;
+        mSafeStepCache.invalidate();
         if (mLevels.size() == 1) mInitialMesh = Mesh();
         mLevel = 0;
         mLevelStart = total;
@@ -370,6 +373,7 @@ void Evolution::updateConvergence()
             return;
         }
         ++mLevel; // the next, finer level starts from this surface
+        mSafeStepCache.invalidate(); // (a new delta: a new skin)
         mLevelStart = total;
     }
 }

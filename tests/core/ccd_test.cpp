@@ -2,6 +2,7 @@
 // evolution keeping two surfaces driven into each other apart.
 #include "mesh_invariants.h"
 #include "riemesh/ccd.h"
+#include "riemesh/edge_ops.h"
 #include "riemesh/evolution.h"
 #include "riemesh/primitives.h"
 #include "riemesh/regularity.h"
@@ -10,6 +11,7 @@
 #include <doctest/doctest.h>
 
 #include <cmath>
+#include <random>
 
 using namespace riemesh;
 
@@ -165,4 +167,83 @@ TEST_CASE("ccd: two bubbles inflating into each other at vmax = delta never cros
     CHECK(stats.merges >= 1);
     CHECK(topologyOf(mesh).components == 1);
     REQUIRE_MESH_OK(mesh);
+}
+
+TEST_CASE("ccd: the pairs kept between steps give the same steps as a search from scratch")
+{
+    // Two spheres drifting into each other with jitter, edited between steps (splits, flips,
+    // collapses, a garbage collection now and then): one copy steps with a SafeStepCache, the
+    // other searches from scratch. The cache must give the same candidates and positions, bit for
+    // bit, while rebuilding its pairs at only some of the steps (else it was never used).
+    Mesh a = makeIcosphere(Vec3(0, 0, 0), 1.0, 3);
+    appendMesh(a, makeIcosphere(Vec3(2.03, 0, 0), 1.0, 3));
+    Mesh b = a;
+    SafeStepCache cache;
+    SafeStepOptions so;
+    so.minSeparation = 1e-3;
+    std::mt19937 rng(11);
+    std::normal_distribution<double> jitter(0.0, 0.0005);
+    std::uniform_real_distribution<double> unit(0.0, 1.0);
+    std::size_t steps = 0, collisions = 0, rebuilt = 0, edits = 0;
+    // Each vertex drifts toward the other sphere at its own speed, so that vertices leave their
+    // skin at different steps: clean and dirty primitives meet in the contact.
+    std::vector<double> speed(4 * a.n_vertices());
+    for (double& x : speed) x = 0.002 * (0.2 + 1.3 * unit(rng));
+    for (int step = 0; step < 80; ++step) {
+        // Edits, the same on both copies (same mesh, same handles).
+        for (int k = 0; k < 4; ++k) {
+            const EdgeHandle e(int(unit(rng) * double(a.n_edges())));
+            const double what = unit(rng);
+            if (a.status(e).deleted()) continue;
+            const HalfedgeHandle h = a.halfedge_handle(e, 0);
+            const Vec3 mid = 0.5 * (position(a, a.from_vertex_handle(h)) + position(a, a.to_vertex_handle(h)));
+            if (what < 0.4 && canSplit(a, e)) {
+                split(a, e, mid);
+                split(b, e, mid);
+            } else if (what < 0.7 && canFlip(a, e)) {
+                flip(a, e);
+                flip(b, e);
+            } else if (canCollapse(a, h, mid)) {
+                collapse(a, h, mid);
+                collapse(b, h, mid);
+            } else {
+                continue;
+            }
+            ++edits;
+        }
+        if (step % 25 == 24) { // renumbered: the cache must be told
+            a.garbage_collection();
+            b.garbage_collection();
+            cache.invalidate();
+        }
+        std::vector<Vec3> start(a.n_vertices());
+        for (auto v : a.vertices()) start[std::size_t(v.idx())] = position(a, v);
+        for (auto v : a.vertices()) {
+            // Every vertex drifts and jitters; now and then one jumps (out of its skin).
+            Vec3 d(jitter(rng), jitter(rng), jitter(rng));
+            const double drift = (step % 20 == 10 ? 10.0 : 1.0) * speed[std::size_t(v.idx()) % speed.size()];
+            d.x() += position(a, v).x() > 1.015 ? -drift : drift; // (a fast step: searched from scratch)
+            if (unit(rng) < 0.003) d *= 20.0;
+            const Mesh::Point p = a.point(v) + Mesh::Point(d.x(), d.y(), d.z());
+            a.set_point(v, p);
+            b.set_point(v, p);
+        }
+        const SafeStepStats sa = limitStepToCollisionFree(a, start, so, &cache);
+        const SafeStepStats sb = limitStepToCollisionFree(b, start, so);
+        CHECK(sa.candidates == sb.candidates);
+        CHECK(sa.collisions == sb.collisions);
+        CHECK(sa.shortened == sb.shortened);
+        bool same = true;
+        for (auto v : a.vertices()) same = same && a.point(v) == b.point(v);
+        CHECK(same);
+        ++steps;
+        collisions += sa.collisions;
+        rebuilt += sa.rebuilt;
+    }
+    MESSAGE(steps << " steps, " << edits << " edits, " << collisions << " collisions, pairs rebuilt at " << rebuilt
+                  << " steps (" << cache.rebuilds() << " rebuilds)");
+    CHECK(collisions > 0);
+    CHECK(edits > 100);
+    CHECK(rebuilt > 0);
+    CHECK(rebuilt < steps / 2);
 }

@@ -16,6 +16,7 @@
 
 #include <array>
 #include <cstddef>
+#include <memory>
 #include <vector>
 
 namespace riemesh {
@@ -50,6 +51,10 @@ struct SafeStepOptions {
     double gapFraction = 0.1;    ///< ACCD's s: a pair may close at most this much of its gap per round
     double shorten = 0.9;        ///< a colliding vertex moves this fraction of the safe time
     int shortenRounds = 4;       ///< rounds that shorten; later ones stop the vertices involved
+    /// With a SafeStepCache: the skin, a fraction of the faces' mean extent (see SafeStepCache),
+    /// and the fraction of the faces and edges out of their skin at which the pairs are rebuilt.
+    double skin = 0.1;
+    double rebuildFraction = 0.25;
 };
 
 struct SafeStepStats {
@@ -58,6 +63,35 @@ struct SafeStepStats {
     std::size_t shortened = 0;  ///< vertices whose motion was shortened (or stopped)
     std::size_t stopped = 0;    ///< vertices that do not move this step at all
     int rounds = 0;
+    bool rebuilt = false;   ///< with a cache: its pairs were rebuilt at this step
+    std::size_t dirty = 0;  ///< with a cache: faces and edges searched afresh (out of their skin, or new)
+};
+
+/// The broad phase of the collision-safe step kept from step to step (Verlet lists with a skin,
+/// as in molecular dynamics). At a rebuild the cache anchors every vertex where it is, and keeps
+/// the vertex-face and edge-edge pairs (sharing no vertex) within 3 skin + minSeparation of each
+/// other. While a primitive's vertices stay within skin / 2 of their anchors and its vertices are
+/// the same, it is "clean": a pair of clean primitives not kept is too far apart to come within
+/// reach this step, so the kept pairs are all the candidates among clean primitives. The others
+/// (new faces and edges of the edits, or out of their skin) are searched afresh, against grids
+/// of the anchored primitives and of each other. The candidates are exactly those of the search
+/// from scratch: same step, same result, for a fraction of the work when few vertices move far.
+/// Call invalidate() when the mesh is renumbered (garbage collection, reordering) or replaced;
+/// a mesh that lost elements is noticed and anchored again.
+class SafeStepCache {
+public:
+    SafeStepCache();
+    ~SafeStepCache();
+    SafeStepCache(SafeStepCache&&) noexcept;
+    SafeStepCache& operator=(SafeStepCache&&) noexcept;
+    void invalidate();
+    std::size_t rebuilds() const; ///< times the pairs were built (the first included)
+
+    struct Impl;
+    Impl& impl() { return *mImpl; } ///< (ccd.cpp's)
+
+private:
+    std::unique_ptr<Impl> mImpl;
 };
 
 /// The mesh holds the positions at the end of a step and `start` (indexed by vertex idx()) those
@@ -66,7 +100,9 @@ struct SafeStepStats {
 /// each ends at start + alpha (end - start) with alpha in [0, 1), and its velocity property (if
 /// any) is scaled by alpha. If the start positions are embedded, so are the end positions.
 /// Deterministic. Deleted elements are ignored.
-SafeStepStats limitStepToCollisionFree(Mesh& mesh, const std::vector<Vec3>& start, const SafeStepOptions& options = {});
+/// With a cache, the candidate pairs come from it (see SafeStepCache); the result is the same.
+SafeStepStats limitStepToCollisionFree(Mesh& mesh, const std::vector<Vec3>& start, const SafeStepOptions& options = {},
+                                       SafeStepCache* cache = nullptr);
 
 /// The smallest distance between a corner of triangle a and triangle b (or a corner of b and a),
 /// or an edge of a and an edge of b, over the pairs that share no vertex (ia, ib: the corners'

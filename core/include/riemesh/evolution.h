@@ -5,6 +5,7 @@
 // `Evolution::step()` advances one iteration for interactive use.
 #pragma once
 
+#include "riemesh/ccd.h"
 #include "riemesh/forces.h"
 #include "riemesh/image.h"
 #include "riemesh/integration.h"
@@ -155,6 +156,7 @@ private:
     std::vector<IterationStats> mHistory;
     std::vector<Vec3> mForces;
     std::vector<Vec3> mStepStart; ///< positions before integration (intersectionFree)
+    SafeStepCache mSafeStepCache; ///< the collision-safe step's pairs (intersectionFree)
     StopReason mReason = StopReason::Running;
     int mLastTopologyEvent = 0;
     int mLastCut = 0;   ///< iteration of the last tunnel cut (0: none)
