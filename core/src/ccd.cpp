@@ -431,22 +431,18 @@ void SafeStepCache::Impl::rebuild(const Mesh& mesh, const std::vector<Vec3>& sta
         boxes.push_back(boxAround(&i, 1));
     }
     vertexGrid.build(boxes, cell);
-    faceOf.clear();
-    boxes.clear();
-    for (std::size_t f = 0; f < faceAt0.size(); ++f)
-        if (faceAt0[f][0] >= 0) {
-            faceOf.push_back(int(f));
-            boxes.push_back(boxAround(faceAt0[f].data(), 3));
-        }
-    faceGrid.build(boxes, cell);
-    edgeOf.clear();
-    boxes.clear();
-    for (std::size_t e = 0; e < edgeAt0.size(); ++e)
-        if (edgeAt0[e][0] >= 0) {
-            edgeOf.push_back(int(e));
-            boxes.push_back(boxAround(edgeAt0[e].data(), 2));
-        }
-    edgeGrid.build(boxes, cell);
+    auto anchoredGrid = [&](const auto& corners, std::vector<int>& of, detail::PackedBoxGrid& grid) {
+        of.clear();
+        boxes.clear();
+        for (std::size_t x = 0; x < corners.size(); ++x)
+            if (corners[x][0] >= 0) { // (live)
+                of.push_back(int(x));
+                boxes.push_back(boxAround(corners[x].data(), int(corners[x].size())));
+            }
+        grid.build(boxes, cell);
+    };
+    anchoredGrid(faceAt0, faceOf, faceGrid);
+    anchoredGrid(edgeAt0, edgeOf, edgeGrid);
     pairs.clear();
     const double keep2 = keep * keep;
     findInChunks(vertexOf.size(), pairLists, pairs, [&](std::size_t k, std::vector<std::array<int, 3>>& found) {
