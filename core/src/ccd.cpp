@@ -319,7 +319,7 @@ void allCandidates(const StepGeometry& g, const std::vector<int>& live, const st
 /// vertices have moved less than half the skin since (see SafeStepCache in riemesh/ccd.h).
 struct SafeStepCache::Impl {
     bool valid = false;
-    double skin = 0, grow = 0;
+    double skin = 0;
     std::size_t vertices0 = 0, faces0 = 0, edges0 = 0; ///< element counts (with deleted ones) at the rebuild
     std::vector<Vec3> anchor;                          ///< positions at the rebuild, by vertex index
     std::vector<std::array<int, 3>> faceAt0;           ///< faces' corners at the rebuild, by face index
@@ -400,19 +400,21 @@ void SafeStepCache::Impl::rebuild(const Mesh& mesh, const std::vector<Vec3>& sta
     valid = true;
     skin = skinFraction * cell;
     // A clean primitive (vertices within skin / 2 of their anchors at the start and the end of a
-    // step) lies within skin / 2 of its anchored box: grids grown by that cover its swept box grown
-    // by eta (as allCandidates grows it), and the pairs kept are those that could still come within
-    // reach: moving at most `skin` each in a step, after moving at most skin / 2 since the rebuild,
-    // two primitives farther apart than 3 skin + eta there never are (StepGeometry's tests).
-    grow = 1.5 * skin + eta;
+    // step) lies within skin / 2 of its anchored box: grids of boxes grown by that and eta cover
+    // its swept box grown by eta (as allCandidates grows it). The pairs kept are those that could
+    // still come within reach: moving at most `skin` each in a step, after moving at most skin / 2
+    // since the rebuild, two primitives farther apart than 3 skin + eta there never are
+    // (StepGeometry's tests); they are found with query boxes grown by the rest, 2.5 skin.
     const double keep = (3 * skin + eta) * 1.0001;
+    const double reach = 2.5 * skin + eta;
     vertices0 = mesh.n_vertices();
     faces0 = mesh.n_faces();
     edges0 = mesh.n_edges();
     anchor.assign(start.begin(), start.begin() + std::ptrdiff_t(vertices0));
     faceAt0 = faceNow;
     edgeAt0 = edgeNow;
-    auto boxAround = [&](const int* v, int k) {
+    const double grow = 0.5 * skin + eta;
+    auto boxAround = [&](const int* v, int k, double grow) {
         constexpr double inf = std::numeric_limits<double>::infinity();
         Box6 b = {inf, inf, inf, -inf, -inf, -inf};
         for (int i = 0; i < k; ++i)
@@ -428,7 +430,7 @@ void SafeStepCache::Impl::rebuild(const Mesh& mesh, const std::vector<Vec3>& sta
     for (auto v : mesh.vertices()) {
         const int i = v.idx();
         vertexOf.push_back(i);
-        boxes.push_back(boxAround(&i, 1));
+        boxes.push_back(boxAround(&i, 1, grow));
     }
     vertexGrid.build(boxes, cell);
     auto anchoredGrid = [&](const auto& corners, std::vector<int>& of, detail::PackedBoxGrid& grid) {
@@ -437,7 +439,7 @@ void SafeStepCache::Impl::rebuild(const Mesh& mesh, const std::vector<Vec3>& sta
         for (std::size_t x = 0; x < corners.size(); ++x)
             if (corners[x][0] >= 0) { // (live)
                 of.push_back(int(x));
-                boxes.push_back(boxAround(corners[x].data(), int(corners[x].size())));
+                boxes.push_back(boxAround(corners[x].data(), int(corners[x].size()), grow));
             }
         grid.build(boxes, cell);
     };
@@ -448,7 +450,7 @@ void SafeStepCache::Impl::rebuild(const Mesh& mesh, const std::vector<Vec3>& sta
     findInChunks(vertexOf.size(), pairLists, pairs, [&](std::size_t k, std::vector<std::array<int, 3>>& found) {
         const int i = vertexOf[k];
         const Vec3& p = anchor[std::size_t(i)];
-        faceGrid.query(boxAround(&i, 1), [&](int item) {
+        faceGrid.query(boxAround(&i, 1, reach), [&](int item) {
             const int f = faceOf[std::size_t(item)];
             const auto& t = faceAt0[std::size_t(f)];
             if (hasCorner(t, i)) return;
@@ -460,7 +462,7 @@ void SafeStepCache::Impl::rebuild(const Mesh& mesh, const std::vector<Vec3>& sta
     findInChunks(edgeOf.size(), pairLists, pairs, [&](std::size_t k, std::vector<std::array<int, 3>>& found) {
         const int e = edgeOf[k];
         const auto& x = edgeAt0[std::size_t(e)];
-        edgeGrid.query(boxAround(x.data(), 2), [&](int item) { // each pair once: from its lower item
+        edgeGrid.query(boxAround(x.data(), 2, reach), [&](int item) { // each pair from its lower item
             const int h = edgeOf[std::size_t(item)];
             const auto& y = edgeAt0[std::size_t(h)];
             if (shareVertex(x, y)) return;
