@@ -184,6 +184,10 @@ TEST_CASE("vdb: round trip of an image, and double grids read as float")
     CHECK(gridClassName(*density) == "fog");
     auto sdf = readVdbImage(path, "sdf");
     CHECK(gridClassName(*sdf) == "levelset");
+    // The phantom's shape and size come through the isolated reader: --reference measures against
+    // the exact distance (edges and corners), not the trilinear grid (lost from 4827400 to now).
+    REQUIRE(bool(phantomReferenceDistance(*sdf)));
+    CHECK(phantomReferenceDistance(*sdf)()(openvdb::Vec3d(3, 4, 5)) == phantomReferenceDistance(*p.sdf)()(openvdb::Vec3d(3, 4, 5)));
     auto a = density->getConstAccessor();
     for (auto it = p.density->cbeginValueOn(); it; ++it) CHECK(a.getValue(it.getCoord()) == *it);
 

@@ -15,6 +15,7 @@
 
 #include <algorithm>
 #include <atomic>
+#include <cctype>
 #include <cerrno>
 #include <cmath>
 #include <csignal>
@@ -60,6 +61,10 @@ struct Header {
     double matrix[16];         ///< index to world, OpenVDB's Mat4d (row vectors, translation in row 3)
     std::uint32_t mapKind;     ///< MapKind
     float background;
+    /// A vdbphantom grid's "riemesh:phantom" and "riemesh:size" metadata (size 0: none), which
+    /// the reference measure needs for the exact distance (level_set.h, phantomReferenceDistance).
+    std::int32_t phantomSize;
+    char phantomShape[28];     ///< NUL-terminated
 };
 struct Tile {
     std::int32_t origin[3];    ///< index space, aligned to the tile's span
@@ -74,7 +79,7 @@ struct Leaf {
     std::uint64_t mask[8];     ///< active voxels, openvdb::util::NodeMask<3> words
     float values[LeafT::SIZE];
 };
-static_assert(sizeof(Header) == 176 && sizeof(Tile) == 24 && sizeof(Leaf) == 16 + 64 + 4 * 512);
+static_assert(sizeof(Header) == 208 && sizeof(Tile) == 24 && sizeof(Leaf) == 16 + 64 + 4 * 512);
 static_assert(std::is_trivially_copyable_v<Header> && std::is_trivially_copyable_v<Leaf>);
 
 constexpr std::uint64_t kMaxTextBytes = 4096;
@@ -190,6 +195,12 @@ void putGrid(AnswerWriter& out, const openvdb::GridBase& grid)
     const openvdb::Mat4d m = map.getAffineMap()->getMat4();
     for (int i = 0; i < 4; ++i)
         for (int j = 0; j < 4; ++j) h.matrix[4 * i + j] = m(i, j);
+    const auto shape = grid.getMetadata<openvdb::StringMetadata>("riemesh:phantom");
+    const auto size = grid.getMetadata<openvdb::Int32Metadata>("riemesh:size");
+    if (shape && size && size->value() > 0 && shape->value().size() < sizeof h.phantomShape) {
+        h.phantomSize = size->value();
+        std::memcpy(h.phantomShape, shape->value().c_str(), shape->value().size() + 1);
+    }
     putText(out, h, grid.getName());
     if (const auto* f = dynamic_cast<const openvdb::FloatGrid*>(&grid)) putTree(out, h, f->tree());
     else if (const auto* d = dynamic_cast<const openvdb::DoubleGrid*>(&grid)) putTree(out, h, d->tree());
@@ -481,6 +492,15 @@ openvdb::FloatGrid::Ptr gridFromChildAnswer(const void* bytes, std::size_t size,
 
     auto grid = openvdb::FloatGrid::create(h.background);
     grid->setName(name);
+    if (h.phantomSize != 0) {
+        const char* shape = h.phantomShape;
+        const std::size_t length = strnlen(shape, sizeof h.phantomShape);
+        const bool plain = length > 0 && length < sizeof h.phantomShape &&
+                           std::all_of(shape, shape + length, [](char c) { return std::islower((unsigned char)c) || c == '-'; });
+        if (h.phantomSize < 0 || !plain) throw unreadable(path, "the reader's answer has malformed phantom metadata");
+        grid->insertMeta("riemesh:phantom", openvdb::StringMetadata(std::string(shape, length)));
+        grid->insertMeta("riemesh:size", openvdb::Int32Metadata(h.phantomSize));
+    }
     grid->setGridClass(openvdb::GridClass(h.gridClass));
     grid->setTransform(transform);
     auto& tree = grid->tree();
