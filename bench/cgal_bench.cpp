@@ -169,7 +169,12 @@ public:
                 for (int i = 0; i < mNx; ++i)
                     mValues[(std::size_t(k) * mNy + j) * mNx + i] = acc.getValue(mLo.offsetBy(i, j, k));
         mBackground = grid.background();
+        const double sign = mSign, level = mIso;
+        mInside = std::count_if(mValues.begin(), mValues.end(), [&](float v) { return sign * (v - level) < 0; });
     }
+
+    /// Voxels inside the surface (f < 0): with none, CGAL's search for initial points never ends.
+    std::size_t insideVoxels() const { return mInside; }
 
     /// f(x) at a world-space point: sign * (value - iso), value trilinear between voxel centres.
     double operator()(const Point& p) const
@@ -212,6 +217,7 @@ private:
     openvdb::Coord mLo;
     int mNx = 0, mNy = 0, mNz = 0;
     std::vector<float> mValues;
+    std::size_t mInside = 0;
 };
 
 /// Topology counted on the index arrays, as vdb_bench counts its peers' (open or non-manifold output
@@ -310,6 +316,8 @@ int run(const Args& a, const openvdb::FloatGrid::Ptr& image)
     t0 = Clock::now();
     const DenseImage dense(*smooth, iso, gclass != "levelset");
     smooth.reset();
+    if (dense.insideVoxels() == 0)
+        throw std::runtime_error("no voxel is inside the surface at iso " + std::to_string(iso) + " after smoothing");
     CGAL::Random rng(unsigned(a.seed));
     CGAL::get_default_random() = CGAL::Random(unsigned(a.seed));
     namespace params = CGAL::parameters;
