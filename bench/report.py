@@ -3,7 +3,8 @@
 
     report.py --bin BUILD/bin --out DIR [--quick] [--docs DOCS_DIR] [--sections a,b,...]
 
-Runs vdbphantom, vdb2mesh, vdb_bench and render_mesh (every run with its own timeout; a failed or
+Runs vdbphantom, vdb2mesh, vdb_bench, render_mesh and, where it was built (CGAL installed), cgal_bench
+(every run with its own timeout; a failed or
 timed-out run becomes a row that says so, never an abort), writes CSV tables, gnuplot PNGs and
 DIR/benchmarks.md; with --docs also DOCS_DIR/benchmarks.md with the PNGs and CSVs under
 DOCS_DIR/benchmarks/. Verdicts on the targets are computed from the numbers of this run.
@@ -22,7 +23,8 @@ import subprocess
 import sys
 import time
 
-SECTIONS = ["phantom", "plate", "peers", "noise", "resolution", "head", "guarantee", "metric", "core", "growth"]
+SECTIONS = ["phantom", "plate", "peers", "sharp", "noise", "resolution", "head", "guarantee", "metric", "core",
+            "growth"]
 HEAD = "/usr/share/mricron/templates/ch2.nii.gz"
 
 
@@ -65,9 +67,10 @@ class Bench:
 
     def phantom(self, size, noise, seed=1, shape="cube-cavity"):
         tag = "" if shape == "cube-cavity" else shape + "_"
-        path = os.path.join(self.work, "phantom_%ss%d_n%g.vdb" % (tag, size, noise))
+        seeded = "" if seed == 1 else "_seed%d" % seed  # seed 1 keeps the names the sections always used
+        path = os.path.join(self.work, "phantom_%ss%d_n%g%s.vdb" % (tag, size, noise, seeded))
         if not os.path.exists(path):
-            ok, _, _, why = self.run("vdbphantom %s %d %g" % (shape, size, noise),
+            ok, _, _, why = self.run("vdbphantom %s %d %g seed %d" % (shape, size, noise, seed),
                                      [self.tool("vdbphantom"), shape, path, "--size", str(size),
                                       "--noise", str(noise), "--seed", str(seed)], 120)
             if not ok:
@@ -558,6 +561,234 @@ class Report:
         if pics:
             self.md.append("\n| " + " | ".join(p[0] for p in pics) + " |\n|" + "---|" * len(pics) + "\n| " +
                            " | ".join("![%s](%s)" % p for p in pics) + " |\n")
+
+    # 4b. Sharp features: riemesh, volumeToMesh and CGAL Mesh_3 side by side (issue 16) -------------
+    def cgal_run(self, img, tag, gaussian, d, runs):
+        """One cgal_bench run at facet distance d (voxels), cached in `runs` by d; returns its row."""
+        key = round(d, 4)
+        if key not in runs:
+            b = self.b
+            ply = os.path.join(b.work, "sharp_%s_cgal_d%g.ply" % (tag, key))
+            okr, out, _, why = b.run("cgal_bench %s d=%g" % (tag, key),
+                                     [b.tool("cgal_bench"), img, "--grid", "density", "--gaussian", gaussian,
+                                      "--facet-distance", "%g" % key, "--reference", img + ":sdf", "--out", ply,
+                                      "--label", tag], self.timeout)
+            rows = parse_csv(out) if okr else []
+            row = rows[0] if rows else {"setting": "d=%g" % key, "status": why or "no output"}
+            row.update(status="ok" if rows else row["status"], d=key, mesh=ply)
+            runs[key] = row
+        return runs[key]
+
+    def cgal_match(self, img, tag, gaussian, target, runs):
+        """CGAL's facet distance whose vertex count is within 10% of `target`: a secant search on
+        log(vertices) against log(distance), kept inside the bracket found so far (at most 7 runs).
+        Returns the closest run (its status says why when none succeeded)."""
+        d, slope, prev = 0.5, 1.0, None
+        lo = hi = None  # distances known to give too many / too few vertices
+        for _ in range(4 if self.q else 7):
+            x = self.cgal_run(img, tag, gaussian, d, runs)
+            if not ok(x) or not x.get("vertices"):
+                break
+            v = x["vertices"]
+            if abs(v / target - 1) <= 0.1:
+                break
+            if v > target:
+                lo = d if lo is None else max(lo, d)
+            else:
+                hi = d if hi is None else min(hi, d)
+            if prev and prev[0] != d and prev[1] != v:
+                slope = min(3.0, max(0.3, -math.log(v / prev[1]) / math.log(d / prev[0])))
+            prev = (d, v)
+            nd = min(8.0, max(0.02, d * (v / target) ** (1.0 / slope)))
+            if lo is not None and hi is not None and not lo < nd < hi:
+                nd = math.sqrt(lo * hi)
+            if round(nd, 4) == round(d, 4):
+                break
+            d = nd
+        good = [x for x in runs.values() if ok(x) and x.get("vertices")]
+        if not good:
+            return next(iter(runs.values()), {"status": "no run"})
+        return min(good, key=lambda x: abs(x["vertices"] / target - 1))
+
+    def sharp(self):
+        b = self.b
+        images = [("cube-cavity", 0.5, 1)] if self.q else (
+            [("cube-cavity", 0.5, s) for s in (1, 2, 3)] + [("thin-plate", 0.5, s) for s in (1, 2, 3)] +
+            [("cube-cavity", 0.8, 1)])
+        smoothings = ["1:1"] if self.q else ["1:1", "2:1"]
+        adapt = [0, 0.5, 1] if self.q else [0, 0.1, 0.2, 0.3, 0.4, 0.5, 0.6, 0.7, 0.8, 0.9, 1.0]
+        fine = [0.2] if self.q else [0.2, 0.1, 0.05]
+        have_cgal = os.access(b.tool("cgal_bench"), os.X_OK)
+        self.section("Sharp features: riemesh, volumeToMesh and CGAL Mesh_3 on the same images",
+                     "Issue 16's side by side: the same images (`vdbphantom SHAPE --size %d --noise N --seed S`), every "
+                     "mesh measured by the same code (vdb/level_set.h `surfaceError`, as `vdb2mesh --reference`: "
+                     "mesh->true mean over ~4 samples per square voxel of the mesh, true->mesh mean from samples of the "
+                     "true surface, its edges and corners included, Hausdorff = the larger of the two maxima; voxels). "
+                     "**riemesh**: `vdb2mesh` defaults. **volumeToMesh**: `vdb_bench mesh` after OpenVDB's "
+                     "`tools::Filter::gaussian` (width:iterations) %s, adaptivities %s; its best setting over all of them by the peers "
+                     "section's rule (the fewest vertices among settings at most as far from the surface, mesh->true, "
+                     "as riemesh; else the most accurate). **CGAL Mesh_3**: `cgal_bench` (CGAL %s, "
+                     "`Labeled_mesh_domain_3::create_implicit_mesh_domain` on iso - trilinear(image), facet_angle 30, "
+                     "no facet_size bound, no perturbation or exudation, manifold output) on the image smoothed by the "
+                     "same Gaussian as volumeToMesh's best setting (on the raw noisy image an implicit mesher makes "
+                     "garbage), its facet_distance searched (secant on log vertices, at most %d runs) for a vertex "
+                     "count within 10%% of riemesh's. Seconds: riemesh without its read and write (metric + evolution, "
+                     "2 threads); volumeToMesh smoothing + meshing (2 threads); CGAL smoothing + meshing (the mesher "
+                     "runs on one thread, CGAL's Sequential_tag); none counts reading the image. The Gaussian alone "
+                     "is the smooth_seconds column of sharp_features.csv." % (
+                         self.size, " and ".join(smoothings),
+                         ", ".join("%g" % a for a in adapt), "5.5 (Debian libcgal-dev)", 4 if self.q else 7))
+        if not have_cgal:
+            self.md.append("**CGAL Mesh_3 not measured**: `cgal_bench` is not in %s (it is built only where CGAL is "
+                           "installed: Debian libcgal-dev, which scripts/setup installs).\n" % b.bin)
+        rows, extra, corner = [], [], {}
+        analytic = set()
+        for shape, noise, seed in images:
+            tag = "%s_n%g_s%d" % ("cube" if shape == "cube-cavity" else "plate", noise, seed)
+            label = "%s, noise %g, seed %d" % (shape, noise, seed)
+            img = b.phantom(self.size, noise, seed=seed, shape=shape)
+            if img is None:
+                rows.append(dict(image=label, method="(phantom)", status=b.failures[-1][1]))
+                continue
+            r = b.vdb2mesh("sharp_%s_R" % tag, img, [], self.timeout)
+            if ok(r):
+                with open(r["stats"]) as f:
+                    analytic.add(bool(json.load(f).get("reference", {}).get("analytic")))
+            rrow = dict(image=label, method="riemesh", setting="vdb2mesh defaults", vertices=r.get("vertices"),
+                        mean_voxels=r.get("mean"), surface_mean_voxels=r.get("surface_mean"),
+                        hausdorff_voxels=r.get("hausdorff"), components=r.get("components"), genus=r.get("genus"),
+                        closed_manifold=1, status=r["status"], mesh=r["mesh"],
+                        seconds=(r["seconds"] - r.get("read_seconds", 0.0) - r.get("write_seconds", 0.0))
+                        if ok(r) else None)
+            rows.append(rrow)
+            # Mesh files only for the image pictured (vdb_bench refuses to write an empty mesh, and the thin
+            # plate smoothed at width 2 has no voxel left above the iso value).
+            pictured = (shape, noise, seed) == images[0]
+            obj_dir = os.path.join(b.work, "sharp_" + tag)
+            peers = []
+            for g in smoothings:
+                peers += b.peers(img, tag, ["--gaussian", g, "--adaptivity", ",".join("%g" % a for a in adapt)],
+                                 self.timeout, obj_dir=obj_dir if pictured else None)
+            # An empty mesh (the smoothing erased the object) measures 0 one way: not a candidate.
+            vdb_rows = [x for x in peers if ok(x) and x.get("tool") == "openvdb" and x.get("vertices")]
+            best = None
+            if vdb_rows:
+                within = [x for x in vdb_rows if ok(r) and x["mean_voxels"] <= r["mean"]]
+                best = (min(within, key=lambda x: x["vertices"]) if within
+                        else min(vdb_rows, key=lambda x: x["mean_voxels"]))
+                name = "".join(c if c.isalnum() or c in ".-" else "_" for c in "openvdb_" + best["setting"])
+                rows.append(dict(best, image=label, method="volumeToMesh", mesh=os.path.join(obj_dir, name + ".obj")))
+                if ok(r):
+                    near = min(vdb_rows, key=lambda x: abs(x["vertices"] / r["vertices"] - 1))
+                    extra.append(dict(near, image=label, method="volumeToMesh, nearest vertex count"))
+            else:
+                rows.append(dict(image=label, method="volumeToMesh", status=next(
+                    (x["status"] for x in peers if not ok(x)), "no run")))
+            if have_cgal:
+                gaussian = best["setting"].split()[1] if best and best["setting"].startswith("gauss ") else "1:1"
+                runs = {}
+                if ok(r) and r.get("vertices"):
+                    m = self.cgal_match(img, tag, gaussian, r["vertices"], runs)
+                    within = ok(m) and abs(m["vertices"] / r["vertices"] - 1) <= 0.1
+                    rows.append(dict(m, image=label, method="CGAL Mesh_3" if within or not ok(m) else
+                                     "CGAL Mesh_3 (closest count: not within 10%)"))
+                else:
+                    rows.append(dict(image=label, method="CGAL Mesh_3", status="no riemesh count to match"))
+                for d in fine:
+                    self.cgal_run(img, tag, gaussian, d, runs)
+                good = [x for x in runs.values() if ok(x) and "mean_voxels" in x]
+                if good:
+                    acc = min(good, key=lambda x: x["mean_voxels"] + x["surface_mean_voxels"])
+                    extra.append(dict(acc, image=label, method="CGAL Mesh_3, most accurate of %d runs" % len(runs)))
+            if pictured:
+                corner = {x["method"]: x for x in rows if x.get("image") == label}
+        self.results["sharp"] = rows
+        cols = ["image", "method", "setting", "status", "vertices", "mean_voxels", "surface_mean_voxels",
+                "hausdorff_voxels", "components", "genus", "closed_manifold", "seconds", "smooth_seconds"]
+        b.write_csv("sharp_features.csv", rows + extra, cols)
+        if analytic == {False}:
+            self.md.append("Reference distance in this run: the phantom's sdf **grid**, interpolated trilinearly, not "
+                           "its analytic distance (`vdb2mesh --stats` says analytic: false: the grid's phantom metadata "
+                           "did not reach the measure), so the true surface's corners are rounded by ~0.5 voxel in the "
+                           "measure; the three methods are measured the same way.\n")
+        elif analytic == {True}:
+            self.md.append("Reference distance: the phantoms' analytic distance, exact at edges and corners.\n")
+        columns = [("image", lambda x: x["image"]), ("method", lambda x: x["method"]),
+                   ("setting", lambda x: x.get("setting", "")), ("vertices", lambda x: fmt(x.get("vertices"))),
+                   ("mesh->true mean", lambda x: fmt(x.get("mean_voxels"))),
+                   ("true->mesh mean", lambda x: fmt(x.get("surface_mean_voxels"))),
+                   ("Hausdorff", lambda x: fmt_hausdorff(x.get("hausdorff_voxels"))), ("topology", topo_text),
+                   ("seconds", lambda x: fmt(x.get("seconds"))), ("status", lambda x: x.get("status", ""))]
+        self.md.append(table(columns, rows))
+        if extra:
+            self.md.append("\nOther settings of the peers on the same images: volumeToMesh at the adaptivity whose vertex "
+                           "count is nearest riemesh's, and CGAL at its most accurate facet distance (lowest sum of the "
+                           "two means) among the matching runs and d = %s:\n" % ", ".join("%g" % d for d in fine))
+            self.md.append(table(columns, extra))
+        # Means over the seeds, per shape and noise.
+        groups = []
+        for shape, noise, _ in images:
+            if (shape, noise) not in groups:
+                groups.append((shape, noise))
+        summary = []
+        for shape, noise in groups:
+            for method in ("riemesh", "volumeToMesh", "CGAL Mesh_3"):
+                xs = [x for x in rows if ok(x) and x["image"].startswith("%s, noise %g," % (shape, noise))
+                      and x["method"].startswith(method) and x.get("hausdorff_voxels") is not None]
+                if not xs:
+                    continue
+                avg = lambda k: sum(x[k] for x in xs) / len(xs)
+                summary.append(dict(image="%s, noise %g (%d seed%s)" % (shape, noise, len(xs), "" if len(xs) == 1 else "s"),
+                                    method=method, vertices=avg("vertices"), mean=avg("mean_voxels"),
+                                    surface=avg("surface_mean_voxels"), hmax=max(x["hausdorff_voxels"] for x in xs),
+                                    topo=sum(topology_ok(x) for x in xs), n=len(xs), seconds=avg("seconds")))
+        if summary:
+            self.md.append("\nMeans over the seeds (Hausdorff: the worst seed):\n")
+            self.md.append(table([
+                ("images", lambda x: x["image"]), ("method", lambda x: x["method"]),
+                ("vertices", lambda x: fmt(x["vertices"])), ("mesh->true mean", lambda x: fmt(x["mean"])),
+                ("true->mesh mean", lambda x: fmt(x["surface"])), ("worst Hausdorff", lambda x: fmt_hausdorff(x["hmax"])),
+                ("one comp., genus 0", lambda x: "%d of %d" % (x["topo"], x["n"])),
+                ("seconds", lambda x: fmt(x["seconds"]))], summary))
+        # The issue's targets, from these numbers.
+        lines = ["\nIssue 16's targets on these images (riemesh's targets; the peers' numbers beside them):\n"]
+        def target_line(what, pick, key, limit):
+            per = {}
+            for x in rows:
+                if pick(x) and ok(x) and x.get(key) is not None:
+                    per.setdefault(x["method"].split(" (")[0], []).append(x[key])
+            if not per:
+                return "- %s: **not measured**." % what
+            parts = []
+            for method in ("riemesh", "volumeToMesh", "CGAL Mesh_3"):
+                v = per.get(method)
+                if v:
+                    met = sum(1 for y in v if y <= limit)
+                    parts.append("%s %d of %d (worst %s)" % (method, met, len(v), fmt(max(v))))
+            rv = per.get("riemesh")
+            verdict_text = ("**not measured**" if not rv else "**met**" if max(rv) <= limit else
+                            "**missed** on %d of %d images" % (sum(1 for y in rv if y > limit), len(rv)))
+            return "- %s: riemesh %s. Images within it: %s." % (what, verdict_text, "; ".join(parts))
+        lines.append(target_line("Hausdorff <= 1.5 voxels at noise 0.5", lambda x: ", noise 0.5," in x["image"],
+                                 "hausdorff_voxels", 1.5))
+        if any(n == 0.8 for _, n, _ in images):
+            lines.append(target_line("Hausdorff <= 2.5 voxels at noise 0.8", lambda x: ", noise 0.8," in x["image"],
+                                     "hausdorff_voxels", 2.5))
+        lines.append(target_line("true->mesh mean <= 0.2 voxel", lambda x: True, "surface_mean_voxels", 0.2))
+        self.md.append("\n".join(lines) + "\n")
+        # One picture of each method on the first cube (seen from a corner).
+        pics = []
+        for method in ("riemesh", "volumeToMesh", "CGAL Mesh_3"):
+            x = next((y for k, y in corner.items() if k.startswith(method)), None)
+            if not x or not ok(x) or not os.path.exists(x.get("mesh", "")):
+                continue
+            png = os.path.join(b.out, "sharp_%s.png" % method.split()[0].lower())
+            if b.render(x["mesh"], png, "%s: %s vertices" % (method, fmt(x["vertices"])), ["--wire", "--view", "iso"]):
+                pics.append((method, os.path.basename(png)))
+        if pics:
+            self.md.append("\n%s, seen from a corner (edges coloured by length):\n\n| %s |\n|%s\n| %s |\n" % (
+                next(iter(corner.values()))["image"], " | ".join(p[0] for p in pics), "---|" * len(pics),
+                " | ".join("![%s](%s)" % p for p in pics)))
 
     # 5. Noise sweep -------------------------------------------------------------------------------
     def noise(self):
@@ -1184,7 +1415,8 @@ def machine_text(load_start):
 
 def main():
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("--bin", required=True, help="folder with vdbphantom, vdb2mesh, vdb_bench, render_mesh, core_bench")
+    ap.add_argument("--bin", required=True, help="folder with vdbphantom, vdb2mesh, vdb_bench, render_mesh, core_bench "
+                    "(and cgal_bench, optional)")
     ap.add_argument("--out", required=True, help="results folder (CSV, PNG, benchmarks.md)")
     ap.add_argument("--docs", help="also write DOCS/benchmarks.md and DOCS/benchmarks/ (PNG, CSV)")
     ap.add_argument("--quick", action="store_true", help="small sizes, seconds; non-zero exit on any failure")
