@@ -1,5 +1,6 @@
-// tests/vdb/corrupt_vdb.h: the .vdb file that corrupts memory inside OpenVDB 10.0.1's reader (issue 17,
-// the finding scripts/fuzz used to report as advisory), made from a fresh file so that it cannot rot.
+// tests/vdb/corrupt_vdb.h: .vdb files that OpenVDB 10.0.1's reader mishandles (issue 17): one
+// corrupts its memory (the finding scripts/fuzz used to report as advisory), one keeps it reading
+// for minutes; made from fresh files so that they cannot rot.
 #pragma once
 
 #include <openvdb/io/File.h>
@@ -57,6 +58,39 @@ inline bool writeHeapOverflowVdb(const std::string& path)
         return true;
     }
     return false;
+}
+
+/// Writes to `path` a float grid "density" of one voxel whose root node claims 2^31 - 1 tiles (the
+/// count after its background value in the topology): OpenVDB 10.0.1 reads that many tiles past the
+/// end of the file, for minutes (the fuzz_vdb_read finding of 2026-11-26). Returns false when the
+/// count is not where this layout puts it.
+inline bool writeEndlessTilesVdb(const std::string& path)
+{
+    openvdb::initialize();
+    const float background = 1234.25f; // a value found nowhere else in the file
+    auto grid = openvdb::FloatGrid::create(background);
+    grid->setName("density");
+    grid->getAccessor().setValueOn(openvdb::Coord(1, 2, 3), 0.5f);
+    {
+        openvdb::io::File file(path);
+        file.write({grid});
+        file.close();
+    }
+    std::string bytes;
+    {
+        std::ifstream in(path, std::ios::binary);
+        bytes.assign(std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>());
+    }
+    // Background, then the tile count (0) and the child count (1), 32-bit each.
+    std::string pattern(reinterpret_cast<const char*>(&background), sizeof background);
+    const std::uint32_t counts[2] = {0, 1};
+    pattern.append(reinterpret_cast<const char*>(counts), sizeof counts);
+    const std::size_t at = bytes.find(pattern);
+    if (at == std::string::npos || bytes.find(pattern, at + 1) != std::string::npos) return false;
+    const std::uint32_t endless = 0x7fffffff;
+    std::memcpy(&bytes[at + sizeof background], &endless, sizeof endless);
+    std::ofstream(path, std::ios::binary | std::ios::trunc) << bytes;
+    return true;
 }
 
 } // namespace riemesh::test

@@ -291,6 +291,18 @@ TEST_CASE("vdb: a file that overflows a heap buffer inside OpenVDB's reader is r
     CHECK(readVdbImage(dir / "good.vdb")->activeVoxelCount() == p.density->activeVoxelCount());
 }
 
+TEST_CASE("vdb: a file that keeps OpenVDB's reader busy for minutes is refused at the reader's time limit")
+{
+    // A root node claiming 2^31 tiles: OpenVDB reads them past the end of the file (15 s natively,
+    // minutes under the sanitizers); the child stops at 4 processor seconds (a 1 KB file).
+    TempDir dir;
+    REQUIRE(riemesh::test::writeEndlessTilesVdb(dir / "endless.vdb"));
+    const std::string message = messageOf([&] { readVdbImage(dir / "endless.vdb"); });
+    MESSAGE(message);
+    CHECK(contains(message, "endless.vdb"));
+    CHECK(contains(message, "corrupt or unreadable VDB file (the reader ran past its 4 s time limit)"));
+}
+
 TEST_CASE("vdb: a reader that runs past its memory limit is refused with the limit named")
 {
     TempDir dir;

@@ -18,7 +18,8 @@
 namespace riemesh::vdb::detail {
 
 /// Runs `read` in a forked child whose address space may grow by `memoryLimitBytes` (setrlimit
-/// RLIMIT_AS; RLIMIT_FSIZE bounds its answer the same). `read` returns a float or double grid with a
+/// RLIMIT_AS; RLIMIT_FSIZE bounds its answer the same) and that may use 4 processor seconds plus
+/// one per MB of the file at `path` (RLIMIT_CPU: "ran past its N s time limit"). `read` returns a float or double grid with a
 /// linear transform, or throws std::runtime_error (a refusal: its message is rethrown here) or
 /// std::bad_alloc. Returns the grid as a FloatGrid with the same name, class, background and
 /// transform, the same tiles and active voxels (double values rounded to float). A child that
