@@ -489,20 +489,19 @@ void SafeStepCache::Impl::classify(const Mesh& mesh, const StepGeometry& g)
             if (!cleanV[std::size_t(v[i])]) return false;
         return true;
     };
-    cleanF.assign(faceNow.size(), 0);
-    dirtyF.clear();
-    for (std::size_t f = 0; f < faceNow.size(); ++f) {
-        if (faceNow[f][0] < 0) continue;
-        cleanF[f] = f < faces0 && faceNow[f] == faceAt0[f] && clean(faceNow[f].data(), 3);
-        if (!cleanF[f]) dirtyF.push_back(int(f));
-    }
-    cleanE.assign(edgeNow.size(), 0);
-    dirtyE.clear();
-    for (std::size_t e = 0; e < edgeNow.size(); ++e) {
-        if (edgeNow[e][0] < 0) continue;
-        cleanE[e] = e < edges0 && edgeNow[e] == edgeAt0[e] && clean(edgeNow[e].data(), 2);
-        if (!cleanE[e]) dirtyE.push_back(int(e));
-    }
+    // Faces and edges: clean when they existed at the rebuild with the same corners, all clean.
+    auto classifyAll = [&](const auto& now, const auto& at0, std::size_t count0, std::vector<char>& cleanOf,
+                           std::vector<int>& dirty) {
+        cleanOf.assign(now.size(), 0);
+        dirty.clear();
+        for (std::size_t x = 0; x < now.size(); ++x) {
+            if (now[x][0] < 0) continue; // (deleted)
+            cleanOf[x] = x < count0 && now[x] == at0[x] && clean(now[x].data(), int(now[x].size()));
+            if (!cleanOf[x]) dirty.push_back(int(x));
+        }
+    };
+    classifyAll(faceNow, faceAt0, faces0, cleanF, dirtyF);
+    classifyAll(edgeNow, edgeAt0, edges0, cleanE, dirtyE);
 }
 
 void SafeStepCache::Impl::collect(const StepGeometry& g, double cell, std::vector<Quad>& candidates)

@@ -15,6 +15,18 @@
 
 namespace riemesh::test {
 
+/// Writes `grid` to `path` as OpenVDB does; returns the file's bytes.
+inline std::string writtenBytes(const std::string& path, const openvdb::FloatGrid::Ptr& grid)
+{
+    {
+        openvdb::io::File file(path);
+        file.write({grid});
+        file.close();
+    }
+    std::ifstream in(path, std::ios::binary);
+    return std::string(std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>());
+}
+
 /// Writes to `path` a float grid "density": four marked voxels in the leaf at the origin, then a
 /// 16^3 block of random values, Blosc-compressed as OpenVDB writes by default; then turns the byte
 /// count of the first leaf's value block into an "uncompressed" count of all the bytes after it.
@@ -35,16 +47,7 @@ inline bool writeHeapOverflowVdb(const std::string& path)
     for (int x = 64; x < 80; ++x)
         for (int y = 0; y < 16; ++y)
             for (int z = 0; z < 16; ++z) acc.setValueOn(openvdb::Coord(x, y, z), unit(random));
-    {
-        openvdb::io::File file(path);
-        file.write({grid});
-        file.close();
-    }
-    std::string bytes;
-    {
-        std::ifstream in(path, std::ios::binary);
-        bytes.assign(std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>());
-    }
+    std::string bytes = writtenBytes(path, grid);
     const std::size_t values = bytes.find(std::string(reinterpret_cast<const char*>(marks), sizeof marks));
     if (values == std::string::npos || values < 24) return false;
     // The count sits before the values (-16: stored raw) or before Blosc's 16-byte header (32).
@@ -71,16 +74,7 @@ inline bool writeEndlessTilesVdb(const std::string& path)
     auto grid = openvdb::FloatGrid::create(background);
     grid->setName("density");
     grid->getAccessor().setValueOn(openvdb::Coord(1, 2, 3), 0.5f);
-    {
-        openvdb::io::File file(path);
-        file.write({grid});
-        file.close();
-    }
-    std::string bytes;
-    {
-        std::ifstream in(path, std::ios::binary);
-        bytes.assign(std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>());
-    }
+    std::string bytes = writtenBytes(path, grid);
     // Background, then the tile count (0) and the child count (1), 32-bit each.
     std::string pattern(reinterpret_cast<const char*>(&background), sizeof background);
     const std::uint32_t counts[2] = {0, 1};
