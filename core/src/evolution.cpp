@@ -228,6 +228,7 @@ IterationStats Evolution::step()
     }
     RegularityStats rs = enforceRegularity(mMesh, mMetric, ro);
     keepObjectNecks(mMesh, image, o.forces, rs.tunnels);
+    vertexMetrics.update(); // the vertices the edits made or moved: for the collision search, and the next step
     phase(it.phases.regularity);
 
     CollisionOptions co;

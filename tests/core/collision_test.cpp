@@ -149,7 +149,7 @@ std::vector<CollisionPair> referenceCollisions(const Mesh& mesh, const MetricFie
             }
             double distance = std::sqrt(d2);
             if (!metric.isEuclidean()) {
-                distance = metricLength(metric, pu, pw);
+                distance = metricLength(metric.at(pu), metric.at(pw), pw - pu); // the endpoints' mean, as documented
                 if (distance > radius) continue;
             }
             // Close along the mesh: a path within the bound, and near a merge no detour either

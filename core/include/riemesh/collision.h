@@ -33,7 +33,9 @@ double collisionRadius(const MetricField& metric, const CollisionOptions& option
 /// lambda_R = 1 + vmax/(2 zeta delta) (Riemannian).
 double collisionLambda(bool euclidean, double zeta, double delta, double vmax);
 
-/// Colliding vertex pairs (each pair once, closest first; distance = metric length, world units).
+/// Colliding vertex pairs (each pair once, closest first; distance = metric length, world units,
+/// with the mean of the endpoints' tensors as for edges: from the VertexMetrics cache where it is
+/// current, else sampled at each vertex).
 /// A pair is reported when d_R(u, w) <= collisionRadius and w is not within u's mesh
 /// neighbourhood: an edge path of length <= neighbourhoodFactor * collisionRadius that is also no
 /// detour, i.e. <= 2 d_E(u, w) + delta / 2 (a longer path goes around a gap: two sheets joined by
