@@ -12,11 +12,13 @@
 
 #include <doctest/doctest.h>
 
+#include <gnu/libc-version.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
 #include <cmath>
 #include <cstdint>
+#include <cstdio>
 #include <cstdlib>
 #include <cstring>
 #include <iterator>
@@ -379,6 +381,39 @@ TEST_CASE("vdb2mesh: a noisy ball phantom becomes one closed genus-0 mesh close 
     auto surface = readVdbImage(f.path("surface.vdb"), "surface");
     CHECK(gridClassName(*surface) == "levelset");
     CHECK(surface->getConstAccessor().getValue(openvdb::Coord(15, 15, 15)) < 0);
+}
+
+TEST_CASE("vdb2mesh: restarts with malloc on transparent huge pages where the kernel wants them advised; the same mesh either way")
+{
+    Fixture f;
+    REQUIRE(f.run(RIEMESH_VDBPHANTOM_EXE, "ball " + f.path("ball.vdb") + " --size 32 --noise 0.3 --seed 5").code == 0);
+    // Where the restart applies: glibc >= 2.35, the kernel's THP mode "madvise", not under valgrind.
+    std::string mode;
+    std::getline(std::ifstream("/sys/kernel/mm/transparent_hugepage/enabled"), mode);
+    int major = 0, minor = 0;
+    std::sscanf(gnu_get_libc_version(), "%d.%d", &major, &minor);
+    const char* preload = std::getenv("LD_PRELOAD");
+    const bool applies = mode.find("[madvise]") != std::string::npos && (major > 2 || (major == 2 && minor >= 35)) &&
+                         !(preload && std::strstr(preload, "vgpreload"));
+    MESSAGE("THP mode '" << mode << "', glibc " << gnu_get_libc_version() << ": restart " << (applies ? "applies" : "does not apply"));
+    const auto args = [&](const std::string& name) {
+        return f.path("ball.vdb") + " " + f.path(name + ".ply") + " -q --stats " + f.path(name + ".json");
+    };
+    const Run plain = f.run(RIEMESH_VDB2MESH_EXE, args("plain"), "RIEMESH_MALLOC_HUGEPAGES=0 ");
+    const Run huge = f.run(RIEMESH_VDB2MESH_EXE, args("huge"));
+    INFO(plain.err << huge.err);
+    REQUIRE(plain.code == 0);
+    REQUIRE(huge.code == 0);
+    CHECK(plain.out.empty());
+    CHECK(huge.out.empty()); // -q holds in the restarted program too
+    CHECK(slurp(f.path("plain.json")).find("\"malloc_huge_pages\": false") != std::string::npos);
+    CHECK(slurp(f.path("huge.json")).find(std::string("\"malloc_huge_pages\": ") + (applies ? "true" : "false")) != std::string::npos);
+    CHECK(slurp(f.path("plain.ply")) == slurp(f.path("huge.ply")));
+    // A tunable the user set is kept beside it (the restart appends), and one naming the malloc
+    // huge pages already (here: off) is left alone: no restart.
+    const Run own = f.run(RIEMESH_VDB2MESH_EXE, args("own"), "GLIBC_TUNABLES=glibc.malloc.hugetlb=0 ");
+    REQUIRE(own.code == 0);
+    CHECK(slurp(f.path("own.json")).find("\"malloc_huge_pages\": false") != std::string::npos);
 }
 
 TEST_CASE("vdb2mesh: SIGINT interrupts the run: exit 130, no output file, an existing one untouched")

@@ -115,6 +115,9 @@ int main(int argc, char** argv)
             if (!args.riemannian) throw BadInput("--write-metric: there is no metric with --metric euclidean");
         }
         if (!args.stats.empty()) apps::checkOutputPath(args.stats, {".json"}, "--stats");
+        // The arguments are sound: from here on the work is long enough for malloc's huge pages to
+        // pay for a second start (nothing has been read or written yet).
+        apps::restartWithHugePageMalloc(argv);
 
         options.iso = args.iso;
         options.riemannian = args.riemannian;

@@ -81,6 +81,9 @@ void printVdb2MeshUsage(std::FILE* out)
         "A progress bar goes to stderr when it is a terminal; a one-line summary to stdout.\n"
         "Outputs are written to a temporary file beside the target and renamed: a failed or interrupted\n"
         "run leaves no partial file and an existing file untouched.\n"
+        "Where the kernel gives transparent huge pages only to memory that asks (mode \"madvise\"),\n"
+        "vdb2mesh restarts itself once with GLIBC_TUNABLES=glibc.malloc.hugetlb=1 (large volumes\n"
+        "about 25%% faster); RIEMESH_MALLOC_HUGEPAGES=0 turns this off.\n"
         "Exit codes: 0 success, 1 bad input or parameters (or a limit reached), 2 internal failure,\n"
         "130 interrupted (Ctrl-C).\n",
         kSmooth, kDelta, kZeta, kMuMax, kSigma, kRho, kTangentialGain, kMaxIterations, static_cast<unsigned long long>(kMaxVertices));

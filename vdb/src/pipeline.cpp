@@ -11,6 +11,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdlib>
+#include <cstring>
 #include <memory>
 #include <sstream>
 
@@ -333,6 +334,14 @@ void analyseResult(PipelineResult& r)
     r.seconds.analysis = secondsSince(start);
 }
 
+/// Whether malloc advises its memory for transparent huge pages (vdb2mesh restarts itself with the
+/// glibc tunable: see restartWithHugePageMalloc in vdb/apps/cli.h).
+static bool mallocHugePages()
+{
+    const char* t = std::getenv("GLIBC_TUNABLES");
+    return t && std::strstr(t, "glibc.malloc.hugetlb=1");
+}
+
 std::string pipelineStatsJson(const PipelineResult& r, const PipelineRecord& record)
 {
     const auto& info = r.image;
@@ -400,6 +409,7 @@ std::string pipelineStatsJson(const PipelineResult& r, const PipelineRecord& rec
                                        {"convert", r.seconds.convert}}},
                     {"evolve_seconds", r.seconds.evolve},
                     {"write_seconds", record.writeSeconds},
+                    {"malloc_huge_pages", mallocHugePages()},
                     {"splits", e.splits},
                     {"collapses", e.collapses},
                     {"flips", e.flips},
