@@ -33,6 +33,7 @@ def assert_same_mesh(result, vertices, faces):
      {"mu_max": 4, "edge_gain": 2, "sigma": 1.5, "rho": 3}),
     (("--zeta", "3", "--smooth", "0.5", "--downsample", "2", "--open-borders"),
      {"zeta": 3, "smooth": 0.5, "downsample": 2, "open_borders": True}),
+    (("--sharpen",), {"sharpen": True}),
 ])
 def test_file_path_gives_vdb2mesh_mesh(bin_dir, tmp_path, phantom_file, flags, kwargs):
     vertices, faces, _ = vdb2mesh(bin_dir, tmp_path, phantom_file, *flags)

@@ -132,6 +132,7 @@ int main(int argc, char** argv)
         options.maxVertices = args.maxVertices;
         options.openBorders = args.openBorders;
         options.intersectionFree = args.intersectionFree;
+        options.sharpen = args.sharpen;
         options.downsample = args.downsample;
         options.levels = args.levels;
         options.threads = args.threads;

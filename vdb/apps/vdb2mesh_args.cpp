@@ -58,6 +58,9 @@ void printVdb2MeshUsage(std::FILE* out)
         "  --intersection-free  no iteration may make faces cross: continuous collision detection of\n"
         "                       every step, collapses, flips and cuts refused where faces would cross\n"
         "                       (off by default: the evolution then takes 2.2-2.3x as long)\n"
+        "  --sharpen            put creases and corners back on the converged surface (filtered\n"
+        "                       face normals, vertices fitted to them, at most 2.5 voxels): for shapes\n"
+        "                       made of flat parts; off by default (it flattens organic relief)\n"
         "  --init I             box (default): a box around each separate part of the object (found on\n"
         "                       the coarsest level), deflating; the image box when no part is found\n"
         "                       sphere:X,Y,Z,R[;X,Y,Z,R...]  bubbles, world units, inflating\n"
@@ -182,6 +185,7 @@ Vdb2MeshArgs parseVdb2MeshArgs(int argc, const char* const* argv)
         else if (f == "-q" || f == "--quiet") a.quiet = true;
         else if (f == "--open-borders") a.openBorders = true;
         else if (f == "--intersection-free") a.intersectionFree = true;
+        else if (f == "--sharpen") a.sharpen = true;
         else if (f == "--downsample") a.downsample = int(parseCount(f, value(), 1, 64));
         else if (f == "--levels") {
             const std::string v = value();

@@ -1,5 +1,6 @@
 // The converter's pipeline after reading (pipeline.h): no OpenVDB include, everything goes through Volume.
 #include "riemesh/vdb/pipeline.h"
+#include "riemesh/sharpen.h"
 
 #include "riemesh/mesh_io.h"
 #include "riemesh/self_intersection.h"
@@ -322,6 +323,23 @@ PipelineResult meshVolume(Volume& volume, const PipelineOptions& options)
                                  " iterations; no output written (raise --delta or the cap)");
     }
 
+    if (options.sharpen) {
+        // Kept only if it adds no crossing: the moves are small (a few voxels at most), but nothing
+        // checks them against the surface's other sheets.
+        const std::size_t before = findSelfIntersections(r.mesh).count();
+        std::vector<Mesh::Point> kept;
+        kept.reserve(r.mesh.n_vertices());
+        for (auto v : r.mesh.vertices()) kept.push_back(r.mesh.point(v));
+        SharpenOptions so;
+        so.maxMove = kSharpenMaxMove * h;
+        const SharpenStats ss = sharpenFeatures(r.mesh, so);
+        r.sharpened = ss.moved;
+        if (findSelfIntersections(r.mesh).count() > before) {
+            std::size_t i = 0;
+            for (auto v : r.mesh.vertices()) r.mesh.point(v) = kept[i++];
+            r.sharpened = 0;
+        }
+    }
     analyseResult(r);
     return r;
 }
@@ -368,6 +386,7 @@ std::string pipelineStatsJson(const PipelineResult& r, const PipelineRecord& rec
                        {"init", o.init.spec},
                        {"open_borders", o.openBorders},
                        {"intersection_free", o.intersectionFree},
+                       {"sharpen", o.sharpen},
                        {"border_voxels_added", r.borderVoxels},
                        {"downsample", o.downsample},
                        {"levels", r.levels},
@@ -410,6 +429,7 @@ std::string pipelineStatsJson(const PipelineResult& r, const PipelineRecord& rec
                     {"evolve_seconds", r.seconds.evolve},
                     {"write_seconds", record.writeSeconds},
                     {"malloc_huge_pages", mallocHugePages()},
+                    {"sharpened_vertices", r.sharpened},
                     {"splits", e.splits},
                     {"collapses", e.collapses},
                     {"flips", e.flips},

@@ -31,6 +31,7 @@ inline constexpr double kMuMax = 9.0;
 inline constexpr double kSigma = 1.0;      // voxels
 inline constexpr double kRho = 2.0;        // voxels
 inline constexpr double kTangentialGain = 4.0;
+inline constexpr double kSharpenMaxMove = 2.5; // voxels, --sharpen
 inline constexpr double kSmooth = 1.0;     // voxels, images (level sets: 0)
 inline constexpr int kMaxIterations = 3000;
 inline constexpr std::uint64_t kMaxVertices = 4'000'000;
@@ -88,6 +89,11 @@ struct PipelineOptions {
     bool openBorders = false;       ///< do not close objects cut by the image box
     /// Intersection-free evolution (EvolutionOptions::intersectionFree); --intersection-free sets it.
     bool intersectionFree = false;
+    /// Put creases and corners back on the converged surface (riemesh/sharpen.h, --sharpen): for
+    /// shapes made of flat parts (CAD, industrial CT, the phantoms' cube); off by default, since it
+    /// also flattens the fine, rounded relief of organic shapes. A vertex moves at most
+    /// kSharpenMaxMove voxels; the result is kept only if it crosses itself no more than before.
+    bool sharpen = false;
     int downsample = 1;             ///< block-average F^3 voxels first, [1, 64]
     /// Coarse-to-fine levels below the finest (--levels): the model converges first with delta 2^L
     /// on an image of 2^L-voxel blocks, then with half of it, ..., then the image as it is. -1: as
@@ -138,6 +144,7 @@ struct PipelineResult {
     double iso = 0;                     ///< the isovalue used
     bool objectBrighter = true;         ///< inside is above iso (false for level sets)
     std::uint64_t borderVoxels = 0;     ///< voxels added by border closing
+    std::size_t sharpened = 0;          ///< vertices moved by --sharpen (0 when off or undone)
     int levels = 0;                     ///< coarse-to-fine levels used below the finest
     VolumeMetricStats metric;           ///< zero with the Euclidean metric
     ImageInfo image;                    ///< the image meshed (after downsampling)

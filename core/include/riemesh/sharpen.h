@@ -1,0 +1,48 @@
+// riemesh/sharpen.h: creases and corners put back on a converged surface (issue 16).
+//
+// The model fits a smoothed image, whose isosurface rounds every crease and corner (a Gaussian of
+// width s pulls a corner in by about 1.4 s, an edge by about 0.8 s), and its curvature force rounds
+// them a little more. sharpenFeatures restores them from the surface itself, as feature-preserving
+// mesh denoising does: the face normals are filtered bilaterally (each face's normal becomes the
+// average of its neighbours' weighted by distance and by normal similarity, Zheng et al. 2011, so
+// that the faces of a rounded crease take the orientation of one of the two flat sides), then the
+// vertices are moved to fit the filtered normals (Sun et al. 2007): on the flat sides nothing moves,
+// and the vertices on the rounding go out to the planes' intersection, the crease or the corner.
+// The planes stay put within a round (fitting through moving centroids would shrink curved parts
+// as Laplacian smoothing does); a few rounds let a corner's faces settle on its three planes.
+// Smoothly curved parts (whose neighbouring normals differ by less than the range width) keep
+// their shape. The mesh's connectivity is not changed; no face is allowed to flip or collapse.
+// Phantom 100^3 (noise 0.5, seed 1), against the exact surface: mesh->true mean 0.155 -> 0.139,
+// true->mesh 0.202 -> 0.166, Hausdorff 2.75 -> 1.46 voxels.
+#pragma once
+
+#include "riemesh/mesh.h"
+
+#include <limits>
+
+namespace riemesh {
+
+struct SharpenOptions {
+    int rounds = 4;            ///< rounds of filtering the normals, then fitting the vertices to them
+    int normalIterations = 8;  ///< bilateral passes over the face normals per round
+    double sigmaNormal = 0.3;  ///< range width of the filter, on |n_f - n_g| (0.3: about 17 degrees)
+    /// Weight of a vertex's own position against each of its faces' planes: what holds a vertex
+    /// along a crease, where the planes leave it free.
+    double pull = 0.02;
+    /// Largest move of a vertex from where it started, world units (vdb2mesh: 2.5 voxels; the
+    /// blur of sigma 1 pulls a cube's corner in by about 1.4 voxels) ...
+    double maxMove = std::numeric_limits<double>::infinity();
+    double maxMoveEdges = 2.0; ///< ... and times the mean length of its edges
+};
+
+struct SharpenStats {
+    std::size_t moved = 0;    ///< vertices that moved more than 1e-6 of the mean edge length
+    double largestMove = 0;   ///< world units
+    std::size_t refused = 0;  ///< vertex moves undone because a face would flip or collapse
+};
+
+/// Moves the vertices of `mesh` (closed, oriented, triangles) onto the creases and corners its
+/// faces imply; see the file comment. Connectivity and topology are unchanged.
+SharpenStats sharpenFeatures(Mesh& mesh, const SharpenOptions& options = {});
+
+} // namespace riemesh
