@@ -670,7 +670,7 @@ class Report:
                              status=rs["status"], mesh=rs["mesh"],
                              seconds=(rs["seconds"] - rs.get("read_seconds", 0.0) - rs.get("write_seconds", 0.0))
                              if ok(rs) else None))
-            # Mesh files only for the image pictured (vdb_bench refuses to write an empty mesh, and the thin
+            # Mesh files only for the image pictured (vdb_bench writes no file for an empty mesh, and the thin
             # plate smoothed at width 2 has no voxel left above the iso value).
             pictured = (shape, noise, seed) == images[0]
             obj_dir = os.path.join(b.work, "sharp_" + tag)

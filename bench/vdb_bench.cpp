@@ -379,7 +379,12 @@ void printMeshRow(const Args& a, const std::string& tool, const std::string& set
         std::string name = tool + "_" + setting;
         for (char& ch : name)
             if (!std::isalnum(static_cast<unsigned char>(ch)) && ch != '.' && ch != '-') ch = '_';
-        writeObj(a.objDir + "/" + name + ".obj", soup);
+        // An empty mesh (the smoothing erased the object) has nothing to show: said, not written
+        // (an empty file would read as a broken one).
+        if (soup.triangles.empty())
+            std::fprintf(stderr, "vdb_bench: %s %s: an empty mesh, no %s.obj written\n", tool.c_str(), setting.c_str(), name.c_str());
+        else
+            writeObj(a.objDir + "/" + name + ".obj", soup);
     }
 }
 
