@@ -27,6 +27,7 @@
 //
 // This file includes CGAL's Mesh_3 and OpenVDB: it takes minutes and GBs to compile; keep it one
 // translation unit.
+#include "bench_common.h"
 #include "../vdb/apps/cli.h"
 #include "riemesh/vdb/io.h"
 #include "riemesh/vdb/level_set.h"
@@ -69,8 +70,8 @@ using Tr = CGAL::Mesh_triangulation_3<Domain, CGAL::Default, CGAL::Sequential_ta
 using C3t3 = CGAL::Mesh_complex_3_in_triangulation_3<Tr>;
 using Criteria = CGAL::Mesh_criteria_3<Tr>;
 
-using Clock = std::chrono::steady_clock;
-double secondsSince(Clock::time_point t) { return std::chrono::duration<double>(Clock::now() - t).count(); }
+using bench::Clock;
+using bench::secondsSince;
 
 struct Args {
     std::string image, grid, reference, referenceGrid = "sdf", out, label;
@@ -222,47 +223,6 @@ private:
 
 /// Topology counted on the index arrays, as vdb_bench counts its peers' (open or non-manifold output
 /// is counted and flagged, never repaired).
-struct SoupTopology {
-    std::size_t vertices = 0, triangles = 0;
-    int components = 0, euler = 0, genus = 0;
-    std::size_t boundaryEdges = 0, nonManifoldEdges = 0, misorientedEdges = 0;
-    bool closedManifold() const { return boundaryEdges == 0 && nonManifoldEdges == 0 && misorientedEdges == 0; }
-};
-
-SoupTopology topologyOf(std::size_t pointCount, const std::vector<openvdb::Vec3I>& triangles)
-{
-    SoupTopology t;
-    t.triangles = triangles.size();
-    std::vector<int> parent(pointCount);
-    std::iota(parent.begin(), parent.end(), 0);
-    const auto find = [&](int x) {
-        while (parent[x] != x) x = parent[x] = parent[parent[x]];
-        return x;
-    };
-    std::vector<bool> used(pointCount, false);
-    std::unordered_map<std::uint64_t, std::array<int, 2>> edges; // min<<32|max -> (forward, backward)
-    for (const auto& tri : triangles)
-        for (int e = 0; e < 3; ++e) {
-            const std::uint32_t a = tri[e], b = tri[(e + 1) % 3];
-            used[a] = true;
-            parent[find(int(a))] = find(int(b));
-            ++edges[(std::uint64_t(std::min(a, b)) << 32) | std::max(a, b)][a < b ? 0 : 1];
-        }
-    for (const auto& [key, count] : edges) {
-        const int faces = count[0] + count[1];
-        if (faces == 1) ++t.boundaryEdges;
-        else if (faces > 2) ++t.nonManifoldEdges;
-        else if (count[0] != 1) ++t.misorientedEdges;
-    }
-    for (std::size_t i = 0; i < used.size(); ++i)
-        if (used[i]) {
-            ++t.vertices;
-            t.components += find(int(i)) == int(i);
-        }
-    t.euler = int(t.vertices) - int(edges.size()) + int(t.triangles);
-    t.genus = (2 * t.components - t.euler) / 2;
-    return t;
-}
 
 void writePly(const std::string& path, const std::vector<openvdb::Vec3d>& points,
               const std::vector<openvdb::Vec3I>& triangles, const std::string& comment)
@@ -287,7 +247,6 @@ void writePly(const std::string& path, const std::vector<openvdb::Vec3d>& points
     });
 }
 
-std::string csvField(const std::string& s) { return s.find(',') == std::string::npos ? s : "\"" + s + "\""; }
 
 int run(const Args& a, const openvdb::FloatGrid::Ptr& image)
 {
@@ -347,61 +306,18 @@ int run(const Args& a, const openvdb::FloatGrid::Ptr& image)
     for (const auto& f : faces) triangles.emplace_back(openvdb::Index32(f[0]), openvdb::Index32(f[1]), openvdb::Index32(f[2]));
 
     if (triangles.empty()) throw std::runtime_error("CGAL Mesh_3 found no surface");
-    const SoupTopology t = topologyOf(points.size(), triangles);
-    std::string mean, hausdorff, surfaceMean;
-    if (sdf) {
-        const vdb::SurfaceError e = vdb::surfaceError(points, triangles, *sdf, vdb::phantomReferenceDistance(*sdf));
-        const double hs = sdf->transform().voxelSize()[0];
-        char buf[64];
-        std::snprintf(buf, sizeof buf, "%.4f", e.meanMeshToSurface / hs);
-        mean = buf;
-        std::snprintf(buf, sizeof buf, "%.4f", e.hausdorff / hs);
-        hausdorff = buf;
-        std::snprintf(buf, sizeof buf, "%.4f", e.meanSurfaceToMesh / hs);
-        surfaceMean = buf;
-    }
     const std::string smoothing = a.gaussianWidth > 0
         ? "gauss " + std::to_string(a.gaussianWidth) + ":" + std::to_string(a.gaussianIterations) : "raw";
     char setting[160];
     std::snprintf(setting, sizeof setting, "%s d=%g s=%g angle=%g%s%s", smoothing.c_str(), a.facetDistance,
                   a.facetSize, a.facetAngle, a.initialPoints > 0 ? (" ip=" + std::to_string(a.initialPoints)).c_str() : "",
                   a.manifold ? "" : " non-manifold");
-    std::printf("image,tool,setting,vertices,triangles,mean_voxels,hausdorff_voxels,components,genus,closed_manifold,"
-                "boundary_edges,bad_edges,seconds,smooth_seconds,surface_mean_voxels\n");
-    std::printf("%s,cgal-mesh3,%s,%zu,%zu,%s,%s,%d,%d,%d,%zu,%zu,%.4f,%.4f,%s\n", csvField(a.label).c_str(),
-                csvField(setting).c_str(), t.vertices, t.triangles, mean.c_str(), hausdorff.c_str(), t.components,
-                t.genus, t.closedManifold() ? 1 : 0, t.boundaryEdges, t.nonManifoldEdges + t.misorientedEdges,
-                smoothSeconds + meshSeconds, smoothSeconds, surfaceMean.c_str());
-    std::fflush(stdout);
+    std::printf("%s", bench::kMeshCsvHeader);
+    bench::printMeshCsvRow(a.label, "cgal-mesh3", setting, points, triangles, sdf.get(), smoothSeconds, meshSeconds);
     if (!a.out.empty()) writePly(a.out, points, triangles, std::string("cgal_bench Mesh_3 ") + setting);
     return 0;
 }
 
 } // namespace
 
-int main(int argc, char** argv)
-{
-    Args args;
-    openvdb::FloatGrid::Ptr image;
-    try {
-        args = parseArgs(argc, argv);
-        try {
-            image = vdb::readImage(args.image, args.grid);
-        } catch (const std::exception& e) {
-            throw BadInput(e.what());
-        }
-    } catch (const std::exception& e) {
-        std::fprintf(stderr, "cgal_bench: error: %s\n", e.what());
-        return 1;
-    }
-    try {
-        auto threadLimit = vdb::limitThreads(args.threads);
-        return run(args, image);
-    } catch (const BadInput& e) {
-        std::fprintf(stderr, "cgal_bench: error: %s\n", e.what());
-        return 1;
-    } catch (const std::exception& e) {
-        std::fprintf(stderr, "cgal_bench: error: %s\n", e.what());
-        return 2;
-    }
-}
+int main(int argc, char** argv) { return bench::benchMain("cgal_bench", argc, argv, parseArgs, run); }

@@ -16,6 +16,7 @@
 // image with N threads: one CSV row, the fastest of R runs.
 //
 // This is the only bench file that includes OpenVDB (each such file costs ~35 s to compile).
+#include "bench_common.h"
 #include "../vdb/apps/cli.h"
 #include "riemesh/vdb/io.h"
 #include "riemesh/vdb/level_set.h"
@@ -44,8 +45,9 @@ using apps::parseCount;
 
 namespace {
 
-using Clock = std::chrono::steady_clock;
-double secondsSince(Clock::time_point t) { return std::chrono::duration<double>(Clock::now() - t).count(); }
+using bench::Clock;
+using bench::csvField;
+using bench::secondsSince;
 
 /// A triangle mesh as arrays: world-space points and vertex indices (what peers produce).
 struct Soup {
@@ -194,51 +196,6 @@ Soup marchingCubes(const openvdb::FloatGrid& grid, double iso, bool brighterInsi
 
 // ---- Measuring any triangle mesh -------------------------------------------------------------------
 
-struct SoupTopology {
-    std::size_t vertices = 0, triangles = 0;
-    int components = 0, euler = 0, genus = 0;
-    std::size_t boundaryEdges = 0, nonManifoldEdges = 0, misorientedEdges = 0;
-    bool closedManifold() const { return boundaryEdges == 0 && nonManifoldEdges == 0 && misorientedEdges == 0; }
-};
-
-/// Counts on index arrays, so that open or non-manifold output (which OpenMesh would refuse) is still
-/// counted and flagged rather than silently repaired.
-SoupTopology topologyOf(const Soup& soup)
-{
-    SoupTopology t;
-    t.triangles = soup.triangles.size();
-    std::vector<int> parent(soup.points.size());
-    std::iota(parent.begin(), parent.end(), 0);
-    const auto find = [&](int x) {
-        while (parent[x] != x) x = parent[x] = parent[parent[x]];
-        return x;
-    };
-    std::vector<bool> used(soup.points.size(), false);
-    // Directed edges: a closed oriented manifold has each (a,b) once and its reverse once.
-    std::unordered_map<std::uint64_t, std::array<int, 2>> edges; // key min<<32|max -> (forward, backward)
-    for (const auto& tri : soup.triangles)
-        for (int e = 0; e < 3; ++e) {
-            const std::uint32_t a = tri[e], b = tri[(e + 1) % 3];
-            used[a] = true;
-            parent[find(int(a))] = find(int(b));
-            const std::uint64_t key = (std::uint64_t(std::min(a, b)) << 32) | std::max(a, b);
-            ++edges[key][a < b ? 0 : 1];
-        }
-    for (const auto& [key, count] : edges) {
-        const int faces = count[0] + count[1];
-        if (faces == 1) ++t.boundaryEdges;
-        else if (faces > 2) ++t.nonManifoldEdges;
-        else if (count[0] != 1) ++t.misorientedEdges;
-    }
-    for (std::size_t i = 0; i < used.size(); ++i)
-        if (used[i]) {
-            ++t.vertices;
-            t.components += find(int(i)) == int(i);
-        }
-    t.euler = int(t.vertices) - int(edges.size()) + int(t.triangles);
-    t.genus = (2 * t.components - t.euler) / 2;
-    return t;
-}
 
 /// Drops unreferenced points (adaptive volumeToMesh leaves some) and turns the normals outward.
 void tidy(Soup& soup)
@@ -351,30 +308,11 @@ Args parseArgs(int argc, char** argv)
     return a;
 }
 
-std::string csvField(const std::string& s) { return s.find(',') == std::string::npos ? s : "\"" + s + "\""; }
-
 void printMeshRow(const Args& a, const std::string& tool, const std::string& setting, Soup soup,
                   const openvdb::FloatGrid* sdf, double smoothSeconds, double meshSeconds)
 {
     tidy(soup);
-    const SoupTopology t = topologyOf(soup);
-    std::string mean = "", hausdorff = "", surfaceMean = "";
-    if (sdf) {
-        const vdb::SurfaceError e = vdb::surfaceError(soup.points, soup.triangles, *sdf, vdb::phantomReferenceDistance(*sdf));
-        const double h = sdf->transform().voxelSize()[0];
-        char buf[64];
-        std::snprintf(buf, sizeof buf, "%.4f", e.meanMeshToSurface / h);
-        mean = buf;
-        std::snprintf(buf, sizeof buf, "%.4f", e.hausdorff / h);
-        hausdorff = buf;
-        std::snprintf(buf, sizeof buf, "%.4f", e.meanSurfaceToMesh / h);
-        surfaceMean = buf;
-    }
-    std::printf("%s,%s,%s,%zu,%zu,%s,%s,%d,%d,%d,%zu,%zu,%.4f,%.4f,%s\n", csvField(a.label).c_str(), tool.c_str(),
-                csvField(setting).c_str(), t.vertices, t.triangles, mean.c_str(), hausdorff.c_str(), t.components,
-                t.genus, t.closedManifold() ? 1 : 0, t.boundaryEdges, t.nonManifoldEdges + t.misorientedEdges,
-                smoothSeconds + meshSeconds, smoothSeconds, surfaceMean.c_str());
-    std::fflush(stdout);
+    bench::printMeshCsvRow(a.label, tool, setting, soup.points, soup.triangles, sdf, smoothSeconds, meshSeconds);
     if (!a.objDir.empty()) {
         std::string name = tool + "_" + setting;
         for (char& ch : name)
@@ -412,8 +350,7 @@ int runMesh(const Args& a, const openvdb::FloatGrid::Ptr& image)
     const std::string smoothing =
         a.gaussianWidth > 0 ? "gauss " + std::to_string(a.gaussianWidth) + ":" + std::to_string(a.gaussianIterations) : "raw";
 
-    std::printf("image,tool,setting,vertices,triangles,mean_voxels,hausdorff_voxels,components,genus,closed_manifold,"
-                "boundary_edges,bad_edges,seconds,smooth_seconds,surface_mean_voxels\n");
+    std::printf("%s", bench::kMeshCsvHeader);
     for (double adaptivity : a.adaptivities) {
         t0 = Clock::now();
         std::vector<openvdb::Vec3s> points;
@@ -473,27 +410,7 @@ int runMetric(const Args& a, const openvdb::FloatGrid::Ptr& image)
 
 int main(int argc, char** argv)
 {
-    Args args;
-    openvdb::FloatGrid::Ptr image;
-    try {
-        args = parseArgs(argc, argv);
-        try {
-            image = vdb::readImage(args.image, args.grid);
-        } catch (const std::exception& e) {
-            throw BadInput(e.what());
-        }
-    } catch (const std::exception& e) {
-        std::fprintf(stderr, "vdb_bench: error: %s\n", e.what());
-        return 1;
-    }
-    try {
-        auto threadLimit = vdb::limitThreads(args.threads);
+    return bench::benchMain("vdb_bench", argc, argv, parseArgs, [](const Args& args, const openvdb::FloatGrid::Ptr& image) {
         return args.mode == "mesh" ? runMesh(args, image) : runMetric(args, image);
-    } catch (const BadInput& e) {
-        std::fprintf(stderr, "vdb_bench: error: %s\n", e.what());
-        return 1;
-    } catch (const std::exception& e) {
-        std::fprintf(stderr, "vdb_bench: error: %s\n", e.what());
-        return 2;
-    }
+    });
 }
