@@ -1228,6 +1228,28 @@ class Report:
             " The last row is the largest mesh again without renumbering it along a space-filling curve "
             "(`EvolutionOptions::renumber`): what the renumbering buys." if any(not x["renumbered"] for x in rows) else ""))
         self.results["core"] = rows
+        # Issue 15: the evolve step on 1 and on 2 threads (core_bench --parallel-only).
+        okp, pout, _, pwhy = b.run("core_bench parallel", [b.tool("core_bench")] + (["--quick"] if self.q else []) +
+                                   ["--parallel-only"], self.timeout)
+        par = []
+        for line in pout.splitlines() if okp else []:
+            f = line.split()
+            # target metric vertices ms1 ms2 speedup cores ...
+            if len(f) >= 7 and f[0].isdigit() and f[1] in ("euclidean", "riemannian") and f[5].endswith("x"):
+                par.append({"target": int(f[0]), "metric": f[1], "vertices": int(f[2]), "ms1": float(f[3]),
+                            "ms2": float(f[4]), "speedup": float(f[5][:-1]), "cores": float(f[6])})
+        if not par:
+            b.failures.append(("core_bench parallel", pwhy or "no table in its output"))
+        else:
+            b.write_csv("core_parallel.csv", par, ["target", "metric", "vertices", "ms1", "ms2", "speedup", "cores"])
+            self.md.append("\n`core_bench --parallel-only`: the evolve step of a converged sphere on 1 and on 2 threads, "
+                           "taking turns on the same mesh (7 rounds; medians; cores = processor seconds per second of "
+                           "the 2-thread steps: near 1 on a busy machine, where the speed-up says little):\n")
+            self.md.append(table([("vertices", lambda x: fmt(x["vertices"])), ("metric", lambda x: x["metric"]),
+                                  ("ms, 1 thread", lambda x: fmt(x["ms1"])), ("ms, 2 threads", lambda x: fmt(x["ms2"])),
+                                  ("speed-up", lambda x: fmt(x["speedup"]) + "x"), ("cores", lambda x: fmt(x["cores"]))],
+                                 par))
+        self.results["parallel"] = par
         main_rows = [x for x in rows if x["renumbered"]]
         if len(main_rows) >= 2:
             f0 = main_rows[0]
@@ -1386,6 +1408,23 @@ class Report:
             m = s500["peak_mb"] / s250["peak_mb"]
             lines.append("- Level-set sphere r = 500 (%s box voxels): peak %s MB = %.2fx r = 250's, target <= 4x: %s." % (
                 fmt(s500.get("box_voxels")), fmt(s500["peak_mb"]), m, verdict(m, 4.0)))
+        # Issue 15: the same iterations at any size; the evolve time; 2 threads over 1.
+        p100, p400 = sc.get(("phantom", 100)), sc.get(("phantom", 400))
+        if p100 and p400 and p100.get("iterations") and p400.get("iterations"):
+            r = p400["iterations"] / p100["iterations"]
+            lines.append("- Phantom iterations at 400^3 over 100^3 (defaults): %s / %s = %.2fx, target <= 1.3x: %s." % (
+                fmt(p400["iterations"]), fmt(p100["iterations"]), r, verdict(r, 1.3)))
+        for n, limit in ((100, 0.12), (400, 3.0)):
+            x = sc.get(("phantom", n))
+            if x and x.get("evolve") is not None:
+                lines.append("- Phantom %d^3, evolve %s s, target <= %g s: %s." % (n, fmt(x["evolve"]), limit,
+                                                                                verdict(x["evolve"], limit)))
+        big = [x for x in self.results.get("parallel", []) if x["vertices"] >= 20000]
+        if big:
+            worst = min(big, key=lambda x: x["speedup"])
+            lines.append("- Evolve step on 2 threads over 1 at 20k+ vertices: %s; target >= 1.7x: %s." % (
+                ", ".join("%s %s %.2fx" % (fmt(x["vertices"]), x["metric"], x["speedup"]) for x in big),
+                "**met**" if worst["speedup"] >= 1.7 else "**missed** (%.2fx)" % worst["speedup"]))
         for n, tl, ml in ((100, 1.5, None), (400, 2.0, 1.5)):
             x = sc.get(("phantom", n))
             if not x:
