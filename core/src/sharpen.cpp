@@ -22,11 +22,10 @@ void measureFaces(const Mesh& mesh, const std::vector<Vec3>& x, FaceGeometry& g)
     g.normal.assign(nf, Vec3::Zero());
     g.area.assign(nf, 0.0);
     for (auto f : mesh.faces()) {
-        auto h0 = mesh.halfedge_handle(f);
-        auto h1 = mesh.next_halfedge_handle(h0);
-        const Vec3& a = x[std::size_t(mesh.from_vertex_handle(h0).idx())];
-        const Vec3& b = x[std::size_t(mesh.to_vertex_handle(h0).idx())];
-        const Vec3& c = x[std::size_t(mesh.to_vertex_handle(h1).idx())];
+        const auto [va, vb, vc] = faceVertices(mesh, f);
+        const Vec3& a = x[std::size_t(va.idx())];
+        const Vec3& b = x[std::size_t(vb.idx())];
+        const Vec3& c = x[std::size_t(vc.idx())];
         const Vec3 n = (b - a).cross(c - a);
         const double len = n.norm();
         const std::size_t i = std::size_t(f.idx());
@@ -139,11 +138,8 @@ SharpenStats sharpenFeatures(Mesh& mesh, const SharpenOptions& o)
             changed = false;
             auto at = [&](std::size_t i) -> const Vec3& { return keep[i] ? x[i] : moved[i]; };
             for (auto f : mesh.faces()) {
-                auto h0 = mesh.halfedge_handle(f);
-                auto h1 = mesh.next_halfedge_handle(h0);
-                const std::size_t a = std::size_t(mesh.from_vertex_handle(h0).idx()),
-                                  b = std::size_t(mesh.to_vertex_handle(h0).idx()),
-                                  c = std::size_t(mesh.to_vertex_handle(h1).idx());
+                const auto [va, vb, vc] = faceVertices(mesh, f);
+                const std::size_t a = std::size_t(va.idx()), b = std::size_t(vb.idx()), c = std::size_t(vc.idx());
                 if (keep[a] && keep[b] && keep[c]) continue;
                 const Vec3 pa = at(a), pb = at(b), pc = at(c);
                 const Vec3 n = (pb - pa).cross(pc - pa);

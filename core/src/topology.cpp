@@ -48,13 +48,6 @@ bool collectLoop(const Mesh& mesh, VertexHandle v, std::vector<VertexHandle>& lo
     return true;
 }
 
-std::array<VertexHandle, 3> faceVertices(const Mesh& mesh, FaceHandle f)
-{
-    const HalfedgeHandle h = mesh.halfedge_handle(f);
-    return {mesh.from_vertex_handle(h), mesh.to_vertex_handle(h),
-            mesh.to_vertex_handle(mesh.next_halfedge_handle(h))};
-}
-
 double distance(const Mesh& mesh, VertexHandle a, VertexHandle b)
 {
     return (mesh.point(a) - mesh.point(b)).norm();

@@ -352,12 +352,11 @@ void analyseResult(PipelineResult& r)
     r.seconds.analysis = secondsSince(start);
 }
 
-/// Whether malloc advises its memory for transparent huge pages (vdb2mesh restarts itself with the
-/// glibc tunable: see restartWithHugePageMalloc in vdb/apps/cli.h).
+/// Whether malloc advises its memory for transparent huge pages (kHugePageMallocTunable in effect).
 static bool mallocHugePages()
 {
     const char* t = std::getenv("GLIBC_TUNABLES");
-    return t && std::strstr(t, "glibc.malloc.hugetlb=1");
+    return t && std::strstr(t, kHugePageMallocTunable);
 }
 
 std::string pipelineStatsJson(const PipelineResult& r, const PipelineRecord& record)

@@ -10,6 +10,7 @@
 #include <Eigen/Core>
 #include <Eigen/Geometry>
 
+#include <array>
 #include <cstddef>
 #include <string>
 #include <vector>
@@ -37,6 +38,13 @@ using FaceHandle = OpenMesh::FaceHandle;
 inline Vec3 toVec3(const Mesh::Point& p) { return Vec3(p[0], p[1], p[2]); }
 inline Mesh::Point toPoint(const Vec3& v) { return Mesh::Point(v.x(), v.y(), v.z()); }
 inline Vec3 position(const Mesh& mesh, VertexHandle v) { return toVec3(mesh.point(v)); }
+
+/// The three corners of triangle `f`, in its winding order.
+inline std::array<VertexHandle, 3> faceVertices(const Mesh& mesh, FaceHandle f)
+{
+    const HalfedgeHandle h = mesh.halfedge_handle(f);
+    return {mesh.from_vertex_handle(h), mesh.to_vertex_handle(h), mesh.to_vertex_handle(mesh.next_halfedge_handle(h))};
+}
 
 /// Name of the per-vertex velocity property (world units per iteration), OpenMesh::Vec3d.
 inline constexpr const char* kVelocityProperty = "riemesh:velocity";

@@ -32,6 +32,9 @@ inline constexpr double kSigma = 1.0;      // voxels
 inline constexpr double kRho = 2.0;        // voxels
 inline constexpr double kTangentialGain = 4.0;
 inline constexpr double kSharpenMaxMove = 2.5; // voxels, --sharpen
+/// The glibc tunable that has malloc advise its memory for transparent huge pages: vdb2mesh
+/// restarts itself with it (see vdb/apps/vdb2mesh.cpp), the stats say whether it was in effect.
+inline constexpr const char* kHugePageMallocTunable = "glibc.malloc.hugetlb=1";
 inline constexpr double kSmooth = 1.0;     // voxels, images (level sets: 0)
 inline constexpr int kMaxIterations = 3000;
 inline constexpr std::uint64_t kMaxVertices = 4'000'000;
