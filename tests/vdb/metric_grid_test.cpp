@@ -223,3 +223,31 @@ TEST_CASE("metric: the edge gain refines across a cube's edges and leaves its fa
     CHECK(tangential(4.0, face) < 1.5); // flat face: tangential directions stay ~Euclidean
     CHECK_THROWS(tangential(0.5, edge));
 }
+
+TEST_CASE("metric: the reference fraction refines a thin plate's corners as much as its faces")
+{
+    // The thin-plate phantom (3 voxels thick): at its corners the structure tensor's xi_0 is about a
+    // quarter of its faces', so with xi_ref at the faces' level the corners stayed nearly Euclidean
+    // (and came out cut by 5 voxels). With the default fraction they reach most of muMax.
+    PhantomOptions po;
+    po.size = 60;
+    const Phantom p = makePhantom(PhantomShape::ThinPlate, po);
+    const double cc = 0.5 * (po.size - 1), half = 0.35 * po.size;
+    // One voxel inside the corner at (+x, -y), mid-thickness; and the middle of the top face.
+    const Coord corner(int(std::lround(cc + half - 1)), int(std::lround(cc - half + 1)), int(std::lround(cc)));
+    const Coord face(int(std::lround(cc)), int(std::lround(cc)), int(std::lround(cc + 1.5)));
+    auto largest = [&](double fraction, const Coord& at) {
+        MetricOptions o;
+        o.referenceFraction = fraction;
+        Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> es(metricAt(computeMetric(*p.density, {1.0, 2.0}, o), *p.density, at));
+        return es.eigenvalues()[2];
+    };
+    const double before = largest(1.0, corner), now = largest(MetricOptions{}.referenceFraction, corner);
+    MESSAGE("largest mu at the plate's corner: fraction 1 -> " << before << ", default -> " << now);
+    CHECK(MetricOptions{}.referenceFraction < 1.0);
+    CHECK(now > 6.0);
+    CHECK(now > before + 2.0);
+    CHECK(largest(MetricOptions{}.referenceFraction, face) > 8.0); // the faces stay saturated
+    CHECK_THROWS(largest(0.0, corner));
+    CHECK_THROWS(largest(1.5, corner));
+}

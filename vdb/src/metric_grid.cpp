@@ -604,6 +604,8 @@ MetricGrids computeMetric(const openvdb::FloatGrid& image, const StructureTensor
     if (!(opt.muMax >= 1.0) || !std::isfinite(opt.muMax)) throw std::invalid_argument("metric: muMax must be >= 1");
     if (!(opt.referencePercentile > 0 && opt.referencePercentile <= 1))
         throw std::invalid_argument("metric: referencePercentile must be in (0, 1]");
+    if (!(opt.referenceFraction > 0 && opt.referenceFraction <= 1))
+        throw std::invalid_argument("metric: referenceFraction must be in (0, 1]");
     if (!(opt.tangentialGain >= 1.0) || !std::isfinite(opt.tangentialGain))
         throw std::invalid_argument("metric: tangentialGain must be >= 1");
     initialize();
@@ -640,7 +642,7 @@ MetricGrids computeMetric(const openvdb::FloatGrid& image, const StructureTensor
         // A level set is a signed distance in world units: |grad| = 1 in its band, so J's largest
         // eigenvalue there is 1 (minus the blur at the band's edges), and it carries no noise to
         // measure. Every brick is computed once, in pass 2.
-        out.xiRef = 1.0;
+        out.xiRef = opt.referenceFraction;
         out.threshold = opt.threshold;
     } else {
         // Pass 1, the scale of the image: the quantiles of xi_0 on a lattice of about kSamples voxels.
@@ -729,6 +731,7 @@ MetricGrids computeMetric(const openvdb::FloatGrid& image, const StructureTensor
             out.xiRef = quantile(opt.referencePercentile, zeros);
         }
         const double median = quantile(0.5, zeros);
+        out.xiRef *= opt.referenceFraction;
         out.threshold = std::min(0.95, std::max(opt.threshold, out.xiRef > 0 ? opt.noiseFactor * median / out.xiRef : 1.0));
     }
     if (!(out.xiRef > 0)) return out; // flat image: G = I
