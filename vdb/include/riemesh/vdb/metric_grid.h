@@ -47,7 +47,7 @@ struct MetricOptions {
     /// so its xi_0 is a half to a quarter of a face's (the thin-plate phantom's corner: 0.26 of its
     /// faces', measured). With xi_ref at the faces' level (1) such corners got mu ~ 2-3 and were
     /// sampled about as coarsely as flat parts: the plate's corners came out cut by 5 voxels.
-    /// Sharp phantoms (noise 0.5, seeds 1-3), two-sided Hausdorff with 1 -> 0.4: cube 2.75 -> 2.18,
+    /// Sharp phantoms (noise 0.5, seed 1), two-sided Hausdorff with 1 -> 0.4: cube 2.75 -> 2.18,
     /// plate 5.77 -> 2.97 (seed 1); 12% more vertices on the cube, 6% on the head MRI.
     double referenceFraction = 0.4;
     double threshold = 0.1;             ///< minimum t (fraction of xi_ref) below which mu = 1
