@@ -183,7 +183,10 @@ TEST_CASE("pipeline: a noisy 3-voxel plate converges as one piece, without mergi
     // Not checked: the genus. At noise 0.8 the rim still lets a few merges through (the image
     // between the pair reads background near the rim): genus 0 on 5 of seeds 1-12 before the
     // regularity change of the 300^3 churn, 4 of 12 after it (seed 1: genus 2). Issue 16 (thin
-    // rims) is open for it; at noise 0.5 seeds 1-9 all end genus 0 (seed 2 with no merge or cut).
+    // rims) is open for it; at noise 0.5 seeds 1-9 all end genus 0. Seed 2 had no merge or cut;
+    // since the metric saturates below the faces' contrast (edges and corners refined as much as
+    // faces, 3902536) seeds 2 and 7 have one merge through the plate that a cut takes back, the
+    // other seven none.
     const std::string path =
         (fs::temp_directory_path() / ("riemesh_plate_test_" + std::to_string(::getpid()) + ".vdb")).string();
     auto run = [&](double noise, int seed) {
@@ -203,5 +206,6 @@ TEST_CASE("pipeline: a noisy 3-voxel plate converges as one piece, without mergi
     CHECK((plain.stop == StopReason::Converged));
     CHECK(plain.topology.components == 1);
     CHECK(plain.topology.genus == 0);
-    CHECK(plain.evolution.merges + plain.evolution.cuts == 0);
+    CHECK(plain.evolution.merges == plain.evolution.cuts); // each merge through the plate cut back
+    CHECK(plain.evolution.merges + plain.evolution.cuts <= 2);
 }

@@ -642,7 +642,7 @@ MetricGrids computeMetric(const openvdb::FloatGrid& image, const StructureTensor
         // A level set is a signed distance in world units: |grad| = 1 in its band, so J's largest
         // eigenvalue there is 1 (minus the blur at the band's edges), and it carries no noise to
         // measure. Every brick is computed once, in pass 2.
-        out.xiRef = opt.referenceFraction;
+        out.xiRef = 1.0;
         out.threshold = opt.threshold;
     } else {
         // Pass 1, the scale of the image: the quantiles of xi_0 on a lattice of about kSamples voxels.
@@ -731,8 +731,14 @@ MetricGrids computeMetric(const openvdb::FloatGrid& image, const StructureTensor
             out.xiRef = quantile(opt.referencePercentile, zeros);
         }
         const double median = quantile(0.5, zeros);
-        out.xiRef *= opt.referenceFraction;
         out.threshold = std::min(0.95, std::max(opt.threshold, out.xiRef > 0 ? opt.noiseFactor * median / out.xiRef : 1.0));
+    }
+    {
+        // mu saturates referenceFraction of the way from the noise threshold to the faces' contrast
+        // (metric_grid.h); the threshold itself stays where it is, so noise stays Euclidean.
+        const double saturate = out.threshold + opt.referenceFraction * (1.0 - out.threshold);
+        out.threshold /= saturate;
+        out.xiRef *= saturate;
     }
     if (!(out.xiRef > 0)) return out; // flat image: G = I
 

@@ -6,18 +6,19 @@
 //   (g_0 = 1, g_1 = g_2 = tangentialGain: the excess over the noise threshold is amplified)
 //
 // The paper only says the eigenvalues are "rescaled and thresholded" to [1, muMax]; our choice:
-// - xi_ref, the rescaling, is a fraction (`referenceFraction`) of a robust maximum, the
-//   `referencePercentile` quantile of xi_0 over the image box (a few strong voxels or outliers do
-//   not decide the scale): flat contours reach muMax, and so do edges and corners, whose xi_0 is
-//   only a half to a quarter of a flat contour's;
-// - t, the threshold below which a direction stays Euclidean, is max(threshold, noiseFactor *
-//   median(xi_0) / xi_ref): the median of xi_0 over the box measures the gradient energy of noise and
-//   flat texture, so far from contours G is exactly the identity.
+// - P, the faces' contrast, is a robust maximum: the `referencePercentile` quantile of xi_0 over the
+//   image box (a few strong voxels or outliers do not decide the scale);
+// - T, below which a direction stays Euclidean, is t0 P with t0 = max(threshold, noiseFactor *
+//   median(xi_0) / P) (at most 0.95): the median of xi_0 over the box measures the gradient energy
+//   of noise and flat texture, so far from contours G is exactly the identity;
+// - mu saturates `referenceFraction` of the way from T to P: xi_ref = T + f (P - T), t = T / xi_ref.
+//   Flat contours reach muMax, and so do edges and corners, whose xi_0 is only a half to a quarter
+//   of a flat contour's; noise below T stays Euclidean whatever f.
 // Both quantiles are taken on a regular lattice of about a million voxels of the box; voxels beyond
 // the filters' reach of any leaf node (empty space, inside constant tiles) have J = 0 and count as
-// zeros without being visited. When the object is too small for the box's top percentile, xi_ref
+// zeros without being visited. When the object is too small for the box's top percentile, P
 // is taken over the voxels the filters reach instead. A level set (grid class) is a signed distance
-// in world units, |grad| = 1 in its band: xi_ref = referenceFraction and t = threshold (no noise to measure), and its
+// in world units, |grad| = 1 in its band: P = 1 and t0 = threshold (no noise to measure), and its
 // metric is kept to its narrow band (its active voxels), where its surface lies.
 // Then a flat contour gets muMax along its normal and 1 along its tangents (coarse along it, Table 1),
 // a sharp edge also along its curvature direction, a corner in all three.
@@ -41,17 +42,18 @@ namespace riemesh::vdb {
 
 struct MetricOptions {
     double muMax = 9.0;                 ///< largest eigenvalue (resolution x sqrt(muMax) at contours)
-    double referencePercentile = 0.99;  ///< quantile of xi_0 over the box: a face's contrast
-    /// xi_ref is this fraction of that quantile. A face puts its gradient energy in xi_0 alone; an
-    /// edge or a corner spreads it over two or three eigenvalues, and sees less surface in the window,
-    /// so its xi_0 is a half to a quarter of a face's (the thin-plate phantom's corner: 0.26 of its
-    /// faces', measured). With xi_ref at the faces' level (1) such corners got mu ~ 2-3 and were
-    /// sampled about as coarsely as flat parts: the plate's corners came out cut by 5 voxels.
-    /// Sharp phantoms (noise 0.5, seed 1), two-sided Hausdorff with 1 -> 0.4: cube 2.75 -> 2.18,
-    /// plate 5.77 -> 2.97 (seed 1); 12% more vertices on the cube, 6% on the head MRI.
-    double referenceFraction = 0.4;
-    double threshold = 0.1;             ///< minimum t (fraction of xi_ref) below which mu = 1
-    double noiseFactor = 3.0;           ///< t >= noiseFactor * median(xi_0) / xi_ref
+    double referencePercentile = 0.99;  ///< quantile of xi_0 over the box: the faces' contrast P
+    /// mu saturates this fraction of the way from the noise threshold T to P (see above). A face
+    /// puts its gradient energy in xi_0 alone; an edge or a corner spreads it over two or three
+    /// eigenvalues, and sees less surface in the window, so its xi_0 is a half to a quarter of a
+    /// face's (the thin-plate phantom's corner: 0.26 of its faces', measured). Saturating at P (1)
+    /// left such corners at mu ~ 2-4, sampled about as coarsely as flat parts: the plate's corners
+    /// came out cut by 5 voxels. Sharp phantoms (noise 0.5, seed 1), two-sided Hausdorff with
+    /// 1 -> 0.3: cube 2.75 -> 2.41, plate 5.77 -> 3.38. A fraction of P itself instead (0.4 P)
+    /// steepened the mapping where noise puts T near it: the phantom at noise 1 broke into 4 parts.
+    double referenceFraction = 0.3;
+    double threshold = 0.1;             ///< minimum t0 (fraction of P) below which mu = 1
+    double noiseFactor = 3.0;           ///< t0 >= noiseFactor * median(xi_0) / P
     double activeTolerance = 1e-3;      ///< voxels with all mu_i - 1 below this stay inactive (G = I)
     /// For xi_1 and xi_2 (the tangential eigenvalues, large only at edges and corners, where gradients
     /// of several directions meet in the window) the excess over the threshold t is multiplied by
