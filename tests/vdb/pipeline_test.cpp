@@ -209,3 +209,21 @@ TEST_CASE("pipeline: a noisy 3-voxel plate converges as one piece, without mergi
     CHECK(plain.evolution.merges == plain.evolution.cuts); // each merge through the plate cut back
     CHECK(plain.evolution.merges + plain.evolution.cuts <= 2);
 }
+
+TEST_CASE("pipeline: the phantom at noise 1 stays one closed surface of genus 0")
+{
+    // The noise sweep's hardest level. A metric that saturated at a fixed fraction of the faces'
+    // contrast (0.4, 3902536) turned into a step where the noise threshold came near that point, and
+    // the phantom broke into 4 components here; saturating part of the way from the threshold
+    // (metric_grid.h, referenceFraction) keeps it whole.
+    const std::string path =
+        (fs::temp_directory_path() / ("riemesh_noise1_test_" + std::to_string(::getpid()) + ".vdb")).string();
+    writePhantom("cube-cavity", path, 100, 1.0, 1);
+    Volume volume = Volume::read(path);
+    fs::remove(path);
+    const PipelineResult r = meshVolume(volume, PipelineOptions{});
+    CHECK_MESH_OK(r.mesh);
+    CHECK((r.stop == StopReason::Converged));
+    CHECK(r.topology.components == 1);
+    CHECK(r.topology.genus == 0);
+}
