@@ -186,7 +186,8 @@ TEST_CASE("pipeline: a noisy 3-voxel plate converges as one piece, without mergi
     // rims) is open for it; at noise 0.5 seeds 1-9 all end genus 0. Seed 2 had no merge or cut;
     // since the metric saturates below the faces' contrast (edges and corners refined as much as
     // faces, 3902536) seeds 2 and 7 have one merge through the plate that a cut takes back, the
-    // other seven none.
+    // other seven none (the sanitizers' build, whose floating point differs: seed 2 two of each).
+    // What holds is that each merge is cut back, a handful at most (hundreds before).
     const std::string path =
         (fs::temp_directory_path() / ("riemesh_plate_test_" + std::to_string(::getpid()) + ".vdb")).string();
     auto run = [&](double noise, int seed) {
@@ -207,7 +208,7 @@ TEST_CASE("pipeline: a noisy 3-voxel plate converges as one piece, without mergi
     CHECK(plain.topology.components == 1);
     CHECK(plain.topology.genus == 0);
     CHECK(plain.evolution.merges == plain.evolution.cuts); // each merge through the plate cut back
-    CHECK(plain.evolution.merges + plain.evolution.cuts <= 2);
+    CHECK(plain.evolution.merges + plain.evolution.cuts <= 8);
 }
 
 TEST_CASE("pipeline: the phantom at noise 1 stays one closed surface of genus 0")
