@@ -4,6 +4,7 @@
 // holds every section.
 #include "riemesh/vdb/pipeline.h"
 #include "riemesh/vdb/volume.h"
+#include "riemesh/vdb/volume_sources.h"
 
 #include "mesh_invariants.h"
 
@@ -188,12 +189,8 @@ TEST_CASE("pipeline: a noisy 3-voxel plate converges as one piece, without mergi
     // faces, 3902536) seeds 2 and 7 have one merge through the plate that a cut takes back, the
     // other seven none (the sanitizers' build, whose floating point differs: seed 2 two of each).
     // What holds is that each merge is cut back, a handful at most (hundreds before).
-    const std::string path =
-        (fs::temp_directory_path() / ("riemesh_plate_test_" + std::to_string(::getpid()) + ".vdb")).string();
-    auto run = [&](double noise, int seed) {
-        writePhantom("thin-plate", path, 100, noise, seed);
-        Volume volume = Volume::read(path);
-        fs::remove(path);
+    auto run = [](double noise, int seed) {
+        Volume volume = phantomVolume("thin-plate", 100, noise, std::uint64_t(seed));
         return meshVolume(volume, PipelineOptions{});
     };
     const PipelineResult r = run(0.8, 1);
@@ -217,11 +214,7 @@ TEST_CASE("pipeline: the phantom at noise 1 stays one closed surface of genus 0"
     // contrast (0.4, 3902536) turned into a step where the noise threshold came near that point, and
     // the phantom broke into 4 components here; saturating part of the way from the threshold
     // (metric_grid.h, referenceFraction) keeps it whole.
-    const std::string path =
-        (fs::temp_directory_path() / ("riemesh_noise1_test_" + std::to_string(::getpid()) + ".vdb")).string();
-    writePhantom("cube-cavity", path, 100, 1.0, 1);
-    Volume volume = Volume::read(path);
-    fs::remove(path);
+    Volume volume = phantomVolume("cube-cavity", 100, 1.0, 1);
     const PipelineResult r = meshVolume(volume, PipelineOptions{});
     CHECK_MESH_OK(r.mesh);
     CHECK((r.stop == StopReason::Converged));
