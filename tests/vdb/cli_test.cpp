@@ -266,7 +266,11 @@ TEST_CASE("vdb2mesh: a file that overflows a heap buffer inside OpenVDB's reader
     INFO("stderr: " << r.err);
     CHECK(r.code == 1);
     CHECK(lineCount(r.err) == 1);
-    CHECK(r.err.rfind("vdb2mesh: error: '" + f.path("overflow.vdb") + "': corrupt or unreadable VDB file (", 0) == 0);
+    // Undefined behaviour in the reader's child: a crash, or rarely OpenVDB's own size check after
+    // the overflow (see io_test). Both are the same refusal to the user.
+    const std::string head = "vdb2mesh: error: '" + f.path("overflow.vdb") + "': ";
+    CHECK((r.err.rfind(head + "corrupt or unreadable VDB file (the reader crashed: signal ", 0) == 0 ||
+           r.err.rfind(head + "truncated or corrupt VDB file (", 0) == 0));
     CHECK(r.out.empty());
     CHECK(slurp(out) == "precious");
     CHECK(f.fileCount() == before);

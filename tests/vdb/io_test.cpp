@@ -280,7 +280,12 @@ TEST_CASE("vdb: a file that overflows a heap buffer inside OpenVDB's reader is r
         const std::string message = messageOf([&] { readVdbImage(dir / "overflow.vdb"); });
         MESSAGE(message);
         CHECK(contains(message, "overflow.vdb"));
-        CHECK(contains(message, "corrupt or unreadable VDB file"));
+        // The overflow is undefined behaviour inside the child: most reads crash there ("the reader
+        // crashed: signal 6/7/11"), but a few reach OpenVDB's own size check after the
+        // overflow and throw (once in CI; 0 of 120 reads here). Either way: refused as corrupt, one line.
+        const bool crashed = contains(message, "corrupt or unreadable VDB file (the reader crashed: signal ");
+        const bool threw = contains(message, "truncated or corrupt VDB file (");
+        CHECK((crashed || threw));
         CHECK(message.find('\n') == std::string::npos);
     }
     // This process reads good files as before.
