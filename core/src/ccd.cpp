@@ -723,6 +723,54 @@ double triangleSeparation(const std::array<int, 3>& ia, const std::array<Vec3, 3
     return std::sqrt(best);
 }
 
+bool trianglesCloserThan(const std::array<int, 3>& ia, const std::array<Vec3, 3>& a, const std::array<int, 3>& ib,
+                         const std::array<Vec3, 3>& b, double r)
+{
+    if (!(r > 0)) return false;
+    // Each distance is measured only where the primitives' boxes come within r of each other on
+    // every axis (a gap wider than r on one axis is a distance wider than r): with r far below the
+    // edges' lengths, as for the edits' separation, most pairs of neighbouring faces stop there.
+    using Box = std::array<double, 6>;
+    auto boxOf = [](const Vec3* p, int k) {
+        Box box = {p[0][0], p[0][1], p[0][2], p[0][0], p[0][1], p[0][2]};
+        for (int i = 1; i < k; ++i)
+            for (int c = 0; c < 3; ++c) {
+                box[std::size_t(c)] = std::min(box[std::size_t(c)], p[i][c]);
+                box[std::size_t(c) + 3] = std::max(box[std::size_t(c) + 3], p[i][c]);
+            }
+        return box;
+    };
+    const double reach = r * (1 + 1e-9);
+    auto near = [reach](const Box& x, const Box& y) {
+        for (std::size_t c = 0; c < 3; ++c)
+            if (x[c] - y[c + 3] > reach || y[c] - x[c + 3] > reach) return false;
+        return true;
+    };
+    auto in = [](int v, const std::array<int, 3>& ids) { return v == ids[0] || v == ids[1] || v == ids[2]; };
+    const Box boxA = boxOf(a.data(), 3), boxB = boxOf(b.data(), 3);
+    if (!near(boxA, boxB)) return false;
+    auto closer = [r](double d2) { return std::sqrt(d2) < r; }; // (as triangleSeparation(...) < r)
+    for (std::size_t i = 0; i < 3; ++i) {
+        if (!in(ia[i], ib) && near(boxOf(&a[i], 1), boxB) && closer(pointTriangleDistanceSquared(a[i], b[0], b[1], b[2])))
+            return true;
+        if (!in(ib[i], ia) && near(boxOf(&b[i], 1), boxA) && closer(pointTriangleDistanceSquared(b[i], a[0], a[1], a[2])))
+            return true;
+    }
+    for (std::size_t i = 0; i < 3; ++i) {
+        const std::size_t i1 = (i + 1) % 3;
+        const Vec3 x[2] = {a[i], a[i1]};
+        const Box boxX = boxOf(x, 2);
+        if (!near(boxX, boxB)) continue;
+        for (std::size_t j = 0; j < 3; ++j) {
+            const std::size_t j1 = (j + 1) % 3;
+            if (ia[i] == ib[j] || ia[i] == ib[j1] || ia[i1] == ib[j] || ia[i1] == ib[j1]) continue;
+            const Vec3 y[2] = {b[j], b[j1]};
+            if (near(boxX, boxOf(y, 2)) && closer(segmentSegmentDistanceSquared(a[i], a[i1], b[j], b[j1]))) return true;
+        }
+    }
+    return false;
+}
+
 bool facesMeetMesh(const Mesh& mesh, const std::vector<FaceHandle>& faces, double minSeparation)
 {
     struct Face {
@@ -761,7 +809,7 @@ bool facesMeetMesh(const Mesh& mesh, const std::vector<FaceHandle>& faces, doubl
     auto meet = [minSeparation](const Face& x, const Face& y) {
         return detail::boxesOverlap(x.box, y.box) &&
                (detail::classifyTriangles(x.ids, x.ref, y.ids, y.ref) != detail::TriangleContact::None ||
-                (minSeparation > 0 && triangleSeparation(x.ids, x.p, y.ids, y.p) < minSeparation));
+                trianglesCloserThan(x.ids, x.p, y.ids, y.p, minSeparation));
     };
     for (std::size_t i = 0; i < mine.size(); ++i)
         for (std::size_t j = i + 1; j < mine.size(); ++j)

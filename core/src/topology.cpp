@@ -271,7 +271,7 @@ bool zipBand(const Mesh& mesh, const std::vector<VertexHandle>& a, const std::ve
 /// the one-rings of u and w), beyond the vertices and edges they share (exact tests, see
 /// riemesh/self_intersection.h). A band that folds or twists, or cuts through a nearby sheet,
 /// would leave the surface self-intersecting. With minSeparation > 0, a band face may come no
-/// closer than that to a face it shares no vertex with (triangleSeparation, riemesh/ccd.h).
+/// closer than that to a face it shares no vertex with (trianglesCloserThan, riemesh/ccd.h).
 bool isBandEmbedded(const Mesh& mesh, const std::vector<FaceHandle>& nearby, const std::vector<Triangle>& band,
                     double minSeparation)
 {
@@ -284,7 +284,7 @@ bool isBandEmbedded(const Mesh& mesh, const std::vector<FaceHandle>& nearby, con
         return std::array<Vec3, 3>{position(mesh, t[0]), position(mesh, t[1]), position(mesh, t[2])};
     };
     auto tooClose = [&](const Triangle& x, const Triangle& y) {
-        return minSeparation > 0 && triangleSeparation(ids(x), points(x), ids(y), points(y)) < minSeparation;
+        return trianglesCloserThan(ids(x), points(x), ids(y), points(y), minSeparation);
     };
     Eigen::AlignedBox3d box;
     std::vector<TriangleRef> refs;

@@ -36,6 +36,39 @@ TEST_CASE("ccd: distances from a point to a triangle and between segments, degen
     CHECK(segmentSegmentDistanceSquared(Vec3(0, 0, 0), Vec3(0, 0, 0), Vec3(3, 0, 0), Vec3(3, 0, 0)) == doctest::Approx(9.0));
 }
 
+TEST_CASE("ccd: trianglesCloserThan answers as triangleSeparation < r, for pairs sharing 0 to 2 corners")
+{
+    // Random pairs: b's corners near a's (so that small r are met as well), some of them shared.
+    std::mt19937 rng(1717);
+    std::uniform_real_distribution<double> unit(-1.0, 1.0);
+    auto jitter = [&](double s) { return Vec3(s * unit(rng), s * unit(rng), s * unit(rng)); };
+    std::size_t closer = 0, farther = 0;
+    for (int n = 0; n < 4000; ++n) {
+        const std::array<Vec3, 3> a = {jitter(1), jitter(1), jitter(1)};
+        const std::array<int, 3> ia = {0, 1, 2};
+        const int shared = n % 3; // corners of b that are a's
+        std::array<Vec3, 3> b;
+        std::array<int, 3> ib;
+        const double scale = std::pow(10.0, -double(n % 7)); // how near the others lie to a's corners
+        for (int k = 0; k < 3; ++k) {
+            const std::size_t i = std::size_t(k);
+            if (k < shared) b[i] = a[i], ib[i] = k;
+            else b[i] = a[(i + std::size_t(n)) % 3] + jitter(scale) + (k == 2 ? jitter(1) : Vec3::Zero()), ib[i] = 3 + k;
+        }
+        const double d = triangleSeparation(ia, a, ib, b);
+        for (double r : {1e-9, 1e-6, 1e-4, 1e-2, 0.1, 0.5, 2.0}) {
+            const bool expect = d < r;
+            CHECK(trianglesCloserThan(ia, a, ib, b, r) == expect);
+            CHECK(trianglesCloserThan(ib, b, ia, a, r) == expect);
+            (expect ? closer : farther) += 1;
+        }
+        CHECK_FALSE(trianglesCloserThan(ia, a, ib, b, 0.0));
+    }
+    // Both answers were asked for, many times.
+    CHECK(closer > 2000);
+    CHECK(farther > 2000);
+}
+
 TEST_CASE("ccd: a point passing through a triangle in one step collides, one passing beside it does not")
 {
     const double eta = 1e-3;

@@ -112,9 +112,14 @@ SafeStepStats limitStepToCollisionFree(Mesh& mesh, const std::vector<Vec3>& star
 double triangleSeparation(const std::array<int, 3>& ia, const std::array<Vec3, 3>& a, const std::array<int, 3>& ib,
                           const std::array<Vec3, 3>& b);
 
+/// triangleSeparation(ia, a, ib, b) < r, without measuring the pairs whose boxes are farther
+/// than r apart (the same answer, for a fraction of the work when r is small); false for r <= 0.
+bool trianglesCloserThan(const std::array<int, 3>& ia, const std::array<Vec3, 3>& a, const std::array<int, 3>& ib,
+                         const std::array<Vec3, 3>& b, double r);
+
 /// True when one of the live `faces` of `mesh` meets another live face (of the list or not)
 /// anywhere but where they share vertices (exact; the classification of findSelfIntersections),
-/// or, with minSeparation > 0, comes closer to it than that (triangleSeparation).
+/// or, with minSeparation > 0, comes closer to it than that (trianglesCloserThan).
 /// O(faces of the mesh): for occasional edits (a tunnel cut); regularity uses a spatial grid.
 bool facesMeetMesh(const Mesh& mesh, const std::vector<FaceHandle>& faces, double minSeparation = 0);
 

@@ -54,7 +54,7 @@ bool IntersectionGuard::crosses(const std::vector<Triangle>& made, const std::ar
     }
     auto tooClose = [&](const std::array<int, 3>& ia, const std::array<Vec3, 3>& a, const std::array<int, 3>& ib,
                         const std::array<Vec3, 3>& b) {
-        return mMinSeparation > 0 && triangleSeparation(ia, a, ib, b) < mMinSeparation;
+        return trianglesCloserThan(ia, a, ib, b, mMinSeparation);
     };
     for (std::size_t i = 0; i < made.size(); ++i)
         for (std::size_t j = i + 1; j < made.size(); ++j)

@@ -17,7 +17,7 @@ namespace riemesh::detail {
 class IntersectionGuard {
 public:
     /// minSeparation > 0: an edit is refused too when its new faces come closer than that (world
-    /// units) to a face they share no vertex with (triangleSeparation, riemesh/ccd.h).
+    /// units) to a face they share no vertex with (trianglesCloserThan, riemesh/ccd.h).
     explicit IntersectionGuard(const Mesh& mesh, double minSeparation = 0) : mMesh(mesh), mMinSeparation(minSeparation) {}
 
     /// Collapsing h (its from-vertex into its to-vertex, moved to `target`, world units) leaves
