@@ -842,7 +842,7 @@ double minimumSeparation(const Mesh& mesh, double radius)
             }
         return b;
     };
-    grid.reset(4 * radius + 1e-9, 4 * faces.size() + 64);
+    grid.reset(4 * radius + 1e-9, 4 * faces.size() + 64, faces.size());
     for (std::size_t f = 0; f < faces.size(); ++f) grid.insert(int(f), boxOf(faces[f].data(), 3));
     for (auto v : mesh.vertices()) {
         const int i = v.idx();
@@ -853,7 +853,7 @@ double minimumSeparation(const Mesh& mesh, double radius)
             best = std::min(best, std::sqrt(pointTriangleDistanceSquared(start[i], start[t[0]], start[t[1]], start[t[2]])));
         });
     }
-    grid.reset(4 * radius + 1e-9, 4 * edges.size() + 64);
+    grid.reset(4 * radius + 1e-9, 4 * edges.size() + 64, edges.size());
     for (std::size_t e = 0; e < edges.size(); ++e) grid.insert(int(e), boxOf(edges[e].data(), 2));
     for (std::size_t e = 0; e < edges.size(); ++e) {
         const auto& x = edges[e];

@@ -101,3 +101,39 @@ TEST_CASE("box grid: huge, infinite and NaN boxes neither crash nor hide the oth
     CHECK(reported({-inf, -inf, -inf, inf, inf, inf}) == std::vector<int>{0, 1, 2, 4, 5, 6});
     CHECK(reported({nan, nan, nan, nan, nan, nan}).empty());
 }
+
+TEST_CASE("hashed box grid: items given room up front are reported only once inserted, with their current box")
+{
+    // The intersection guard resets its grid with room for every face index, then inserts the
+    // live faces and, after each edit, enters the edited faces again with their new boxes.
+    using riemesh::detail::BoxGrid;
+    std::mt19937 rng(23);
+    std::uniform_real_distribution<double> unit(0.0, 1.0);
+    for (std::size_t room : {std::size_t(0), std::size_t(500)}) {
+        BoxGrid grid;
+        grid.reset(2.0, 4 * 500 + 64, room);
+        std::vector<Box6> box(500);
+        std::vector<char> in(500, 0);
+        for (std::size_t i = 0; i < 500; ++i) {
+            box[i] = randomBox(rng, 0.0, 10.0, 1.5);
+            if (unit(rng) < 0.8) grid.insert(int(i), box[i]), in[i] = 1; // (some are never entered)
+        }
+        for (std::size_t i = 0; i < 500; i += 7) // entered again elsewhere: the old entries stay, filtered
+            if (in[i]) box[i] = randomBox(rng, 0.0, 10.0, 1.5), grid.insert(int(i), box[i]);
+        std::size_t reported = 0;
+        for (int q = 0; q < 300; ++q) {
+            const Box6 query = randomBox(rng, 0.0, 12.0, 3.0);
+            std::vector<int> got;
+            grid.query(query, [&](int item) { got.push_back(item); });
+            std::sort(got.begin(), got.end());
+            got.erase(std::unique(got.begin(), got.end()), got.end()); // (an item entered twice may come twice)
+            std::vector<int> want;
+            for (std::size_t i = 0; i < 500; ++i)
+                if (in[i] && boxesOverlap(query, box[i])) want.push_back(int(i));
+            CAPTURE(q);
+            CHECK(got == want);
+            reported += got.size();
+        }
+        CHECK(reported > 300);
+    }
+}

@@ -37,8 +37,9 @@ inline bool boxesOverlap(const Box6& x, const Box6& y)
 
 class BoxGrid {
 public:
-    /// Empties the grid; cells of side cellSize (world units, > 0), buckets for about `entries`.
-    void reset(double cellSize, std::size_t entries)
+    /// Empties the grid; cells of side cellSize (world units, > 0), buckets and room for about
+    /// `entries`, and room for the items 0..items-1 (inserting item k grows it to k + 1 otherwise).
+    void reset(double cellSize, std::size_t entries, std::size_t items = 0)
     {
         mInvCell = 1.0 / cellSize;
         std::size_t buckets = 256;
@@ -47,8 +48,9 @@ public:
         while ((std::size_t(1) << mBits) < buckets) ++mBits;
         mHead.assign(buckets, -1);
         mEntries.clear();
-        mBox.clear();
-        mIsLarge.clear();
+        mEntries.reserve(entries);
+        mBox.assign(items, kEmpty);
+        mIsLarge.assign(items, 0);
         mLarge.clear();
     }
 

@@ -26,14 +26,17 @@ void IntersectionGuard::build()
 {
     mBuilt = true;
     double extent = 0;
+    mBoxes.assign(mMesh.n_faces(), Box6{});
     std::size_t count = 0;
     for (auto f : mMesh.faces()) {
         const Box6 b = faceBox(f);
         extent += std::max({b[3] - b[0], b[4] - b[1], b[5] - b[2]});
+        mBoxes[std::size_t(f.idx())] = b;
         ++count;
     }
-    mGrid.reset(count ? std::max(extent / double(count), 1e-9) : 1.0, 4 * count + 64);
-    for (auto f : mMesh.faces()) mGrid.insert(f.idx(), faceBox(f));
+    // (Room made up front: the grid and its buffers are new at every regularity step.)
+    mGrid.reset(count ? std::max(extent / double(count), 1e-9) : 1.0, 4 * count + 64, mMesh.n_faces());
+    for (auto f : mMesh.faces()) mGrid.insert(f.idx(), mBoxes[std::size_t(f.idx())]);
 }
 
 void IntersectionGuard::update(VertexHandle v)

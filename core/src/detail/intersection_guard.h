@@ -44,6 +44,7 @@ private:
     double mMinSeparation = 0;
     BoxGrid mGrid;
     bool mBuilt = false;
+    std::vector<Box6> mBoxes; // scratch
     std::vector<Triangle> mMade; // scratch
 };
 
