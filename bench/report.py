@@ -1243,8 +1243,12 @@ class Report:
         else:
             b.write_csv("core_parallel.csv", par, ["target", "metric", "vertices", "ms1", "ms2", "speedup", "cores"])
             self.md.append("\n`core_bench --parallel-only`: the evolve step of a converged sphere on 1 and on 2 threads, "
-                           "taking turns on the same mesh (7 rounds; medians; cores = processor seconds per second of "
-                           "the 2-thread steps: near 1 on a busy machine, where the speed-up says little):\n")
+                           "taking turns step by step on the same mesh (pairs in alternating order). The 1-thread steps "
+                           "run pinned to each processor in turn and the faster processor's median is the 1-thread "
+                           "figure: this virtual machine's processors are not equally fast (one 1-thread step took 9 ms "
+                           "in one run and 18 ms in the next), and unpinned rounds gave speed-ups above 2 on 2 cores. "
+                           "Medians; cores = processor seconds per second of the 2-thread steps: near 1 on a busy "
+                           "machine, where the speed-up says little:\n")
             self.md.append(table([("vertices", lambda x: fmt(x["vertices"])), ("metric", lambda x: x["metric"]),
                                   ("ms, 1 thread", lambda x: fmt(x["ms1"])), ("ms, 2 threads", lambda x: fmt(x["ms2"])),
                                   ("speed-up", lambda x: fmt(x["speedup"]) + "x"), ("cores", lambda x: fmt(x["cores"]))],
