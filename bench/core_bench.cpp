@@ -255,7 +255,7 @@ bool pinCallingThread(int cpu)
 /// iteration of a converged sphere costs about the same from one step to the next), in pairs whose
 /// order alternates, so that both meet the same machine. This one is a virtual machine whose
 /// processors are not equally fast (host contention: a 1-thread step took 9 ms in one run and 18 ms
-/// in the next, always on the same processor), which gave speed-ups above 2 on 2 cores. So the
+/// in the next, using 1.00 cores both times), which gave speed-ups above 2 on 2 cores. So the
 /// 1-thread steps run pinned to each processor in turn, and the 1-thread figure is the median on
 /// the faster one: the speed-up is measured against the best single core. Figures are medians of
 /// the timed steps, phases their means.
@@ -281,8 +281,7 @@ void parallelScaling(bool quick)
             double cpu2 = 0, wall2 = 0; // processor and wall seconds of the 2-thread steps
             const int pairs = (quick ? 2 : 7) * c.stepsPerRound;
             c.evolution->step();
-            for (int pair = 0; pair < pairs; ++pair) {
-                double pairMs[2];
+            for (int pair = 0; pair < pairs; ++pair)
                 for (int k = 0; k < 2; ++k) {
                     const int t = pair % 2 == 0 ? k : 1 - k;
                     setThreadCount(t + 1);
@@ -290,15 +289,14 @@ void parallelScaling(bool quick)
                     const bool pinned = t == 0 && pinCallingThread(cpu);
                     const double t0 = now(), c0 = processorSeconds();
                     const IterationStats::Phases p = c.evolution->step().phases;
-                    pairMs[t] = (now() - t0) * 1000.0;
+                    const double stepMs = (now() - t0) * 1000.0;
                     if (t == 0) pinCallingThread(-1);
-                    ms[t].push_back(pairMs[t]);
-                    if (t == 0) onCpu[pinned ? cpu : 0].push_back(pairMs[t]);
+                    ms[t].push_back(stepMs);
+                    if (t == 0) onCpu[pinned ? cpu : 0].push_back(stepMs);
                     if (t == 1) cpu2 += processorSeconds() - c0, wall2 += now() - t0;
                     sum[t].forces += p.forces, sum[t].integration += p.integration, sum[t].regularity += p.regularity;
                     sum[t].collisions += p.collisions, sum[t].topology += p.topology;
                 }
-            }
             setThreadCount(0);
             auto median = [](std::vector<double> v) {
                 std::nth_element(v.begin(), v.begin() + long(v.size() / 2), v.end());

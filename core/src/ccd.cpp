@@ -730,9 +730,8 @@ bool trianglesCloserThan(const std::array<int, 3>& ia, const std::array<Vec3, 3>
     // Each distance is measured only where the primitives' boxes come within r of each other on
     // every axis (a gap wider than r on one axis is a distance wider than r): with r far below the
     // edges' lengths, as for the edits' separation, most pairs of neighbouring faces stop there.
-    using Box = std::array<double, 6>;
     auto boxOf = [](const Vec3* p, int k) {
-        Box box = {p[0][0], p[0][1], p[0][2], p[0][0], p[0][1], p[0][2]};
+        Box6 box = {p[0][0], p[0][1], p[0][2], p[0][0], p[0][1], p[0][2]};
         for (int i = 1; i < k; ++i)
             for (int c = 0; c < 3; ++c) {
                 box[std::size_t(c)] = std::min(box[std::size_t(c)], p[i][c]);
@@ -741,13 +740,13 @@ bool trianglesCloserThan(const std::array<int, 3>& ia, const std::array<Vec3, 3>
         return box;
     };
     const double reach = r * (1 + 1e-9);
-    auto near = [reach](const Box& x, const Box& y) {
+    auto near = [reach](const Box6& x, const Box6& y) {
         for (std::size_t c = 0; c < 3; ++c)
             if (x[c] - y[c + 3] > reach || y[c] - x[c + 3] > reach) return false;
         return true;
     };
     auto in = [](int v, const std::array<int, 3>& ids) { return v == ids[0] || v == ids[1] || v == ids[2]; };
-    const Box boxA = boxOf(a.data(), 3), boxB = boxOf(b.data(), 3);
+    const Box6 boxA = boxOf(a.data(), 3), boxB = boxOf(b.data(), 3);
     if (!near(boxA, boxB)) return false;
     auto closer = [r](double d2) { return std::sqrt(d2) < r; }; // (as triangleSeparation(...) < r)
     for (std::size_t i = 0; i < 3; ++i) {
@@ -759,7 +758,7 @@ bool trianglesCloserThan(const std::array<int, 3>& ia, const std::array<Vec3, 3>
     for (std::size_t i = 0; i < 3; ++i) {
         const std::size_t i1 = (i + 1) % 3;
         const Vec3 x[2] = {a[i], a[i1]};
-        const Box boxX = boxOf(x, 2);
+        const Box6 boxX = boxOf(x, 2);
         if (!near(boxX, boxB)) continue;
         for (std::size_t j = 0; j < 3; ++j) {
             const std::size_t j1 = (j + 1) % 3;
