@@ -58,7 +58,6 @@ struct Candidate {
 
 /// Per-thread buffers reused across calls (no allocation per call in steady state).
 struct Scratch {
-    std::vector<double> normal;  ///< 3 per vertex index, area-weighted sums
     std::vector<int> live;       ///< vertex index of each live vertex
     std::vector<double> soa;     ///< 6 arrays of `count` in slot order: x y z nx ny nz
     std::vector<int> id;         ///< vertex index of each slot
@@ -110,10 +109,9 @@ std::vector<CollisionPair> findCollisions(const Mesh& mesh, const MetricField& m
     const std::size_t n = mesh.n_vertices();
     Scratch& S = scratch();
 
-    // Area-weighted vertex normals: each face's in parallel, then summed per vertex around it (the
-    // mesh's order: the same sums for any thread count).
-    S.normal.assign(3 * n, 0.0);
-    double* const normal = S.normal.data();
+    // Area-weighted vertex normals: each face's in parallel here, summed per vertex around it (the
+    // mesh's order: the same sums for any thread count) where the vertices are copied in slot order
+    // below (one parallel pass less: on 2 threads a short pass costs the worker's wake-up).
     const Mesh::Point* const point = mesh.points();
     const std::size_t faceCount = mesh.n_faces();
     S.faceNormal.resize(3 * faceCount);
@@ -130,15 +128,6 @@ std::vector<CollisionPair> findCollisions(const Mesh& mesh, const MetricField& m
         const double gx = point[c][0] - pa[0], gy = point[c][1] - pa[1], gz = point[c][2] - pa[2];
         double* const fn = faceNormal + 3 * fi;
         fn[0] = ey * gz - ez * gy, fn[1] = ez * gx - ex * gz, fn[2] = ex * gy - ey * gx;
-    });
-    detail::parallelFor(0, n, kGrain, [&](std::size_t i) {
-        const VertexHandle v{int(i)};
-        if (mesh.status(v).deleted()) return;
-        double* const nv = normal + 3 * i;
-        for (auto f = mesh.cvf_begin(v); f.is_valid(); ++f) { // the mesh's order: any thread count
-            const double* const fn = faceNormal + 3 * std::size_t(f->idx());
-            nv[0] += fn[0], nv[1] += fn[1], nv[2] += fn[2];
-        }
     });
 
     // Live vertices: straight from the mesh's point array unless some are deleted.
@@ -177,7 +166,11 @@ std::vector<CollisionPair> findCollisions(const Mesh& mesh, const MetricField& m
         qx[s] = xyz[3 * v];
         qy[s] = xyz[3 * v + 1];
         qz[s] = xyz[3 * v + 2];
-        const double nx = normal[3 * v], ny = normal[3 * v + 1], nz = normal[3 * v + 2];
+        double nx = 0, ny = 0, nz = 0;
+        for (auto f = mesh.cvf_begin(VertexHandle(v)); f.is_valid(); ++f) {
+            const double* const fn = faceNormal + 3 * std::size_t(f->idx());
+            nx += fn[0], ny += fn[1], nz += fn[2];
+        }
         const double len = std::sqrt(nx * nx + ny * ny + nz * nz);
         const double inv = len > 0 ? 1.0 / len : 0.0;
         mx[s] = nx * inv;

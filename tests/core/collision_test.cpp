@@ -1,4 +1,5 @@
 #include "../../core/src/detail/mesh_walk.h" // private to the core: included by path
+#include "../../core/src/detail/spatial_hash.h"
 #include "mesh_invariants.h"
 #include "riemesh/collision.h"
 #include "riemesh/primitives.h"
@@ -509,4 +510,51 @@ TEST_CASE("bounded path search: stopping at the targets gives the targets' full-
         partial += allReached && earlyCount < settled;
     }
     CHECK(partial > 50);
+}
+
+TEST_CASE("cell grid: the pairs closer than the cell size, for point sets spanning many build chunks")
+{
+    // The build's passes over the points run in parallel chunks (bounds, cell keys): sets of
+    // several chunks, dense and sparse boxes, against all pairs; a NaN anywhere is refused.
+    std::mt19937 rng(4096);
+    std::uniform_real_distribution<double> unit(0.0, 1.0);
+    for (const double spread : {30.0, 3000.0}) { // a dense box, then a sparse one (far more cells than points)
+        const std::size_t n = 9000;
+        std::vector<double> xyz(3 * n);
+        for (double& x : xyz) x = spread * unit(rng) - 7.0;
+        std::vector<int> index(n - 100); // a subset, through an index array as findCollisions uses it
+        for (std::size_t i = 0; i < index.size(); ++i) index[i] = int(i + 100);
+        const double cell = 1.0;
+        detail::CellGrid grid;
+        for (const bool indexed : {false, true}) {
+            INFO("spread " << spread << ", indexed " << indexed);
+            const std::size_t count = indexed ? index.size() : n;
+            grid.build(xyz.data(), indexed ? index.data() : nullptr, count, cell);
+            auto point = [&](std::size_t i) { return xyz.data() + 3 * (indexed ? std::size_t(index[i]) : i); };
+            auto close = [&](std::size_t i, std::size_t j) {
+                const double* p = point(i);
+                const double* q = point(j);
+                const double d2 = (p[0] - q[0]) * (p[0] - q[0]) + (p[1] - q[1]) * (p[1] - q[1]) + (p[2] - q[2]) * (p[2] - q[2]);
+                return d2 < cell * cell;
+            };
+            std::set<std::pair<std::uint32_t, std::uint32_t>> found;
+            grid.forEachCell([&](std::uint32_t a0, std::uint32_t a1, const std::uint32_t(*range)[2], int ranges) {
+                for (std::uint32_t s = a0; s < a1; ++s)
+                    for (int r = 0; r < ranges; ++r)
+                        for (std::uint32_t t = r == 0 ? s + 1 : range[r][0]; t < range[r][1]; ++t) {
+                            const std::uint32_t i = grid.index(s), j = grid.index(t);
+                            if (close(i, j)) found.insert({std::min(i, j), std::max(i, j)});
+                        }
+            });
+            std::set<std::pair<std::uint32_t, std::uint32_t>> expected;
+            for (std::size_t i = 0; i < count; ++i)
+                for (std::size_t j = i + 1; j < count; ++j)
+                    if (close(i, j)) expected.insert({std::uint32_t(i), std::uint32_t(j)});
+            CHECK(found.size() == expected.size());
+            CHECK(found == expected);
+            if (spread < 100) CHECK(expected.size() > 1000); // the dense box does have close pairs
+        }
+        xyz[3 * (n - 5) + 1] = std::numeric_limits<double>::quiet_NaN(); // in the last chunk
+        CHECK_THROWS_AS(grid.build(xyz.data(), nullptr, n, cell), std::invalid_argument);
+    }
 }

@@ -1,5 +1,7 @@
 #include "detail/spatial_hash.h"
 
+#include "detail/parallel.h"
+
 #include <algorithm>
 #include <cmath>
 #include <limits>
@@ -23,17 +25,34 @@ void CellGrid::build(const double* xyz, const int* index, std::size_t n, double 
 
     // Bounding box; cells are counted from its low corner (any grid of this cell size finds the
     // same pairs), with one cell of padding on each side so that +-1 neighbours never wrap.
-    double lo[3], hi[3];
-    for (int a = 0; a < 3; ++a) lo[a] = hi[a] = at(0)[a];
-    bool numbers = true; // no NaN (infinities fail the extent test below)
-    for (std::size_t i = 0; i < n; ++i) {
-        const double* p = at(i);
-        for (int a = 0; a < 3; ++a) {
-            lo[a] = std::min(lo[a], p[a]);
-            hi[a] = std::max(hi[a], p[a]);
-            numbers &= p[a] == p[a];
+    // (In parallel chunks, each with its own bounds, then combined: min and max do not depend on
+    // the order.)
+    const std::size_t chunks = (n + kChunk - 1) / kChunk;
+    mBounds.resize(chunks);
+    parallelForChunks(0, chunks, 1, [&](std::size_t c0, std::size_t c1) {
+        for (std::size_t c = c0; c < c1; ++c) {
+            Bounds& b = mBounds[c];
+            for (int a = 0; a < 3; ++a) b.lo[a] = b.hi[a] = at(c * kChunk)[a];
+            b.numbers = true;
+            for (std::size_t i = c * kChunk, end = std::min(n, (c + 1) * kChunk); i < end; ++i) {
+                const double* p = at(i);
+                for (int a = 0; a < 3; ++a) {
+                    b.lo[a] = std::min(b.lo[a], p[a]);
+                    b.hi[a] = std::max(b.hi[a], p[a]);
+                    b.numbers &= p[a] == p[a];
+                }
+            }
         }
-    }
+    });
+    double lo[3], hi[3];
+    for (int a = 0; a < 3; ++a) lo[a] = mBounds[0].lo[a], hi[a] = mBounds[0].hi[a];
+    bool numbers = true; // no NaN (infinities fail the extent test below)
+    for (const Bounds& b : mBounds)
+        for (int a = 0; a < 3; ++a) {
+            lo[a] = std::min(lo[a], b.lo[a]);
+            hi[a] = std::max(hi[a], b.hi[a]);
+            numbers &= b.numbers;
+        }
     const double inv = 1.0 / cellSize;
     std::uint64_t extent[3];
     for (int a = 0; a < 3; ++a) {
@@ -60,14 +79,15 @@ void CellGrid::build(const double* xyz, const int* index, std::size_t n, double 
         mRow.resize(n);
         mSweepCell.resize(n);
         mTmp.resize(n);
+        parallelForChunks(0, n, kChunk, [&](std::size_t i0, std::size_t i1) {
+            for (std::size_t i = i0; i < i1; ++i) {
+                const double* p = at(i);
+                mRow[i] = std::uint32_t(cellOf(p, ra) * nb + cellOf(p, rb));
+                mSweepCell[i] = std::uint32_t(cellOf(p, s));
+            }
+        });
         mCount.assign(ns + 1, 0);
-        for (std::size_t i = 0; i < n; ++i) {
-            const double* p = at(i);
-            mRow[i] = std::uint32_t(cellOf(p, ra) * nb + cellOf(p, rb));
-            const std::uint32_t w = std::uint32_t(cellOf(p, s));
-            mSweepCell[i] = w;
-            ++mCount[w + 1];
-        }
+        for (std::size_t i = 0; i < n; ++i) ++mCount[mSweepCell[i] + 1];
         for (std::size_t b = 0; b < ns; ++b) mCount[b + 1] += mCount[b];
         for (std::size_t i = 0; i < n; ++i) mTmp[mCount[mSweepCell[i]]++] = std::uint32_t(i);
         mCount.assign(rows + 1, 0);
@@ -88,11 +108,13 @@ void CellGrid::build(const double* xyz, const int* index, std::size_t n, double 
     } else {
         // Sparse box: sort (key, input position).
         mSortKey.resize(n);
-        for (std::size_t i = 0; i < n; ++i) {
-            const double* p = at(i);
-            mSortKey[i] = (cellOf(p, ra) * nb + cellOf(p, rb)) * ns + cellOf(p, s);
-            mOrder[i] = std::uint32_t(i);
-        }
+        parallelForChunks(0, n, kChunk, [&](std::size_t i0, std::size_t i1) {
+            for (std::size_t i = i0; i < i1; ++i) {
+                const double* p = at(i);
+                mSortKey[i] = (cellOf(p, ra) * nb + cellOf(p, rb)) * ns + cellOf(p, s);
+                mOrder[i] = std::uint32_t(i);
+            }
+        });
         const std::uint64_t* key = mSortKey.data();
         std::sort(mOrder.begin(), mOrder.end(),
                   [key](std::uint32_t x, std::uint32_t y) { return key[x] != key[y] ? key[x] < key[y] : x < y; });

@@ -93,6 +93,13 @@ private:
     // Scratch, kept between builds.
     std::vector<std::uint32_t> mRow, mSweepCell, mCount, mTmp;
     std::vector<std::uint64_t> mSortKey;
+    /// The O(n) passes over the points run in parallel chunks of kChunk points.
+    static constexpr std::size_t kChunk = 4096;
+    struct Bounds {
+        double lo[3], hi[3];
+        bool numbers;
+    };
+    std::vector<Bounds> mBounds; ///< per chunk
 };
 
 } // namespace riemesh::detail
