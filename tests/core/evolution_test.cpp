@@ -384,3 +384,43 @@ TEST_CASE("evolution: a metric that stretches lengths 1.5x on one half densifies
     CHECK(ratio > 2.6);
     CHECK(ratio < 4.0);
 }
+
+TEST_CASE("evolution: coarse levels fly at their own faster speed, the finest at the user's, and bad coarse speeds are refused")
+{
+    // A ball far inside its box: the first iterations are free flight, at the terminal speed
+    // externalLimit / damping of the level's delta per iteration (more at the box's corners), so
+    // the mean kinetic energy over delta^2 grows as its square: (0.25 / 0.125)^2 = 4x on the coarse
+    // level with the default coarse speeds. The finest level ignores them.
+    const auto image = fogImage([](const Vec3& x) { return ballSdf(x, Vec3::Zero(), 5); },
+                                Box3(Vec3::Constant(-24), Vec3::Constant(24)));
+    EuclideanMetric metric;
+    auto peakEnergy = [&](const std::vector<EvolutionLevel>& levels, double coarseVmax, double coarseLimit, int level) {
+        Mesh mesh = makeInitialBox(image, 2.0);
+        EvolutionOptions o = baseOptions(1.0);
+        o.coarseVmaxFraction = coarseVmax;
+        o.coarseExternalLimit = coarseLimit;
+        Evolution evolution(mesh, levels, metric, o);
+        double peak = 0;
+        for (int i = 0; i < 12 && !evolution.done(); ++i) {
+            const IterationStats it = evolution.step();
+            const double delta = o.delta * levels[levels.size() - 1 - std::size_t(it.level)].scale;
+            if (it.level == level) peak = std::max(peak, it.meanKineticEnergy / (delta * delta));
+        }
+        return peak;
+    };
+    const std::vector<EvolutionLevel> schedule = {{&image, 2.0}, {&image, 1.0}};
+    const std::vector<EvolutionLevel> finestOnly = {{&image, 1.0}};
+    const double coarse = peakEnergy(schedule, 0.75, 0.25, 1);
+    const double slowCoarse = peakEnergy(schedule, 0.5, 0.125, 1); // the finest level's speeds
+    INFO("peak KE / delta^2 on the coarse level: " << coarse << ", at the finest level's speeds " << slowCoarse);
+    CHECK(coarse > 2.5 * slowCoarse);
+    CHECK(coarse < 5.0 * slowCoarse);
+    CHECK(peakEnergy(finestOnly, 0.75, 0.25, 0) == peakEnergy(finestOnly, 0.5, 0.125, 0));
+    Mesh mesh = makeInitialBox(image, 2.0);
+    EvolutionOptions o = baseOptions(1.0);
+    o.coarseVmaxFraction = 1.5;
+    CHECK_THROWS_AS(Evolution(mesh, schedule, metric, o), std::invalid_argument);
+    o.coarseVmaxFraction = 0.75;
+    o.coarseExternalLimit = std::nan("");
+    CHECK_THROWS_AS(Evolution(mesh, schedule, metric, o), std::invalid_argument);
+}
