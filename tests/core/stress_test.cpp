@@ -114,6 +114,7 @@ struct StressCase {
     double metricSpread = 1;
     bool bubbles = false;
     std::vector<std::pair<Vec3, double>> spheres;
+    bool schedule = false; ///< a coarse level first (delta x 2, same image; see EvolutionLevel)
     int iterations = 0; ///< cap
 
     std::string describe() const
@@ -132,7 +133,7 @@ struct StressCase {
         if (metric != MetricKind::Euclidean) s << " (mu " << muMax << ")";
         if (metric == MetricKind::Constant) s << " eigenvalues (" << metricEigen.transpose() << ")";
         if (metric == MetricKind::Radial) s << " centre (" << metricCentre.transpose() << ") spread " << metricSpread;
-        s << "; init " << (bubbles ? "bubbles" : "box");
+        s << "; init " << (bubbles ? "bubbles" : "box") << (schedule ? ", coarse level first" : "");
         for (const auto& [c, r] : spheres) s << " (" << c.transpose() << " r " << r << ")";
         s << "; cap " << iterations << " iterations";
         return s.str();
@@ -270,6 +271,8 @@ StressCase makeCase(std::uint64_t seed)
             if (apart) c.spheres.push_back({centre, radius});
         }
     }
+    // Drawn last, so that the other parameters of a seed stay what they were before it existed.
+    c.schedule = !c.bubbles && draw.chance(0.35);
     return c;
 }
 
@@ -442,7 +445,9 @@ RunResult runCase(const StressCase& c)
     const auto metric = makeMetric(c);
     const double initEdge = 0.5 * (1.0 + c.options.zeta) * c.options.delta;
     Mesh mesh = c.spheres.empty() ? makeInitialBox(*image, initEdge) : makeBubbles(c.spheres, initEdge);
-    Evolution evolution(mesh, *image, *metric, c.options);
+    const std::vector<EvolutionLevel> levels =
+        c.schedule ? std::vector<EvolutionLevel>{{image.get(), 2.0}, {image.get(), 1.0}} : std::vector<EvolutionLevel>{{image.get(), 1.0}};
+    Evolution evolution(mesh, levels, *metric, c.options);
     const bool dumping = env("RIEMESH_STRESS_DUMP") != nullptr;
     const int selfEvery = env("RIEMESH_STRESS_SELF") ? std::atoi(env("RIEMESH_STRESS_SELF")) : 0;
     Mesh before;
