@@ -144,9 +144,6 @@ Evolution::Evolution(Mesh& mesh, std::vector<EvolutionLevel> levels, const Metri
             throw std::invalid_argument("evolution: every level needs an image and a scale >= 1");
     if (mOptions.coarseConvergenceWindow < 1 || mOptions.coarseMaxIterations < 1)
         throw std::invalid_argument("evolution: bad coarse-level limits");
-    if (!(mOptions.coarseVmaxFraction > 0 && mOptions.coarseVmaxFraction <= 1) || !(mOptions.coarseExternalLimit >= 0) ||
-        !std::isfinite(mOptions.coarseExternalLimit))
-        throw std::invalid_argument("evolution: coarseVmaxFraction must be in (0, 1] and coarseExternalLimit >= 0");
     prepareMesh(mMesh);
     if (mLevels.size() > 1) mInitialMesh = mMesh;
     mChurn = mMesh.n_vertices(); // a given mesh's numbering is unknown: renumbered at the first step
@@ -166,10 +163,6 @@ EvolutionOptions Evolution::levelOptions() const
 {
     EvolutionOptions o = mOptions;
     o.delta *= mLevels[mLevel].scale;
-    if (mLevel + 1 < int(mLevels.size())) { // a coarse level (see coarseVmaxFraction)
-        o.vmaxFraction = std::max(o.vmaxFraction, o.coarseVmaxFraction);
-        o.forces.externalLimit = std::max(o.forces.externalLimit, o.coarseExternalLimit);
-    }
     return o;
 }
 
@@ -205,10 +198,7 @@ IterationStats Evolution::step()
     io.mass = o.mass;
     io.damping = o.damping;
     io.vmax = vmax;
-    // Travelling: faster than half the terminal speed F / gamma of the finest level's free flight
-    // (in this level's delta; coarse levels fly faster).
-    const double flight = std::min(forces.externalLimit, mOptions.forces.externalLimit);
-    io.movingSpeed = 0.5 * flight * o.delta / std::max(o.damping, 1e-9);
+    io.movingSpeed = 0.5 * forces.externalLimit * o.delta / std::max(o.damping, 1e-9); // half the terminal speed F/gamma
     if (o.intersectionFree) { // the start of the step, for its collision check
         mStepStart.resize(mMesh.n_vertices());
         for (auto v : mMesh.vertices()) mStepStart[std::size_t(v.idx())] = position(mMesh, v);

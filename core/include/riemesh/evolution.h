@@ -68,21 +68,6 @@ struct EvolutionOptions {
     /// the surface near, its result is refined anyway; or after coarseMaxIterations.
     int coarseConvergenceWindow = 8;
     int coarseMaxIterations = 300;
-    /// Coarse levels fly faster: vmax is at least coarseVmaxFraction delta there, and the largest
-    /// push at least coarseExternalLimit delta (free flight at half their delta per iteration
-    /// instead of a quarter, under the crease cap, see step()). A front filling a cavity through a
-    /// hole travels the same distance in voxels on whichever level first lets it through the
-    /// hole, and with delta in voxels that is a finer level the larger the image (the phantom's
-    /// level 1 of 4 at 400^3): the schedule's cost grew with the image. Coarse surfaces are refined
-    /// anyway. Phantom, iterations at 100^3 / 400^3 {levels}: 101 / 213 {3: 13, 2: 13, 1: 144,
-    /// 0: 43} at the finest level's speeds, 98 / 154 {11, 19, 75, 49} at these. A larger vmax
-    /// widens the collision radius (lambda, collisionLambda) with it: at vmax = delta the 3-voxel
-    /// plate (noise 0.5, seed 2) merged through itself three times on level 1 (cut back later), at
-    /// 0.75 never. "Travelling" (see movingFraction) stays relative to the finest level's
-    /// free-flight speed: a front moving at its own level's would count as travelling only after
-    /// its drift caught up, and a level could end while a slow front starts into a hole.
-    double coarseVmaxFraction = 0.75;
-    double coarseExternalLimit = 0.25;
     /// The finest level of a schedule starts next to its surface: its convergence window.
     int scheduledConvergenceWindow = 12;
     /// For this many iterations after a coarse level, the shortest edge is levelSettleFactor delta
