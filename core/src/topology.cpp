@@ -370,10 +370,10 @@ bool chooseBand(const Mesh& mesh, VertexHandle u, VertexHandle w, std::vector<Tr
     return false;
 }
 
-} // namespace
-
-bool canMerge(const Mesh& mesh, VertexHandle u, VertexHandle w, double minSeparation)
+/// canMerge(), with the band merge() adds when true.
+bool findMergeBand(const Mesh& mesh, VertexHandle u, VertexHandle w, double minSeparation, std::vector<Triangle>& band)
 {
+    band.clear();
     if (!mesh.has_vertex_status() || !mesh.has_face_status() || !mesh.has_edge_status()) return false;
     if (!isAlive(mesh, u) || !isAlive(mesh, w) || u == w) return false;
     std::vector<VertexHandle> a, b;
@@ -392,14 +392,12 @@ bool canMerge(const Mesh& mesh, VertexHandle u, VertexHandle w, double minSepara
     for (auto x : a)
         for (auto y : mesh.vv_range(x))
             if (contains(b, y)) return false;
-    std::vector<Triangle> band;
     return chooseBand(mesh, u, w, band, minSeparation);
 }
 
-bool merge(Mesh& mesh, VertexHandle u, VertexHandle w, double minSeparation)
+/// merge() with the band findMergeBand() chose for (u, w) on this very mesh.
+bool mergeWithBand(Mesh& mesh, VertexHandle u, VertexHandle w, const std::vector<Triangle>& band)
 {
-    std::vector<Triangle> band;
-    if (!canMerge(mesh, u, w, minSeparation) || !chooseBand(mesh, u, w, band, minSeparation)) return false;
     const Mesh backup = mesh;
     mesh.delete_vertex(u, false);
     mesh.delete_vertex(w, false);
@@ -411,6 +409,21 @@ bool merge(Mesh& mesh, VertexHandle u, VertexHandle w, double minSeparation)
     }
     tagMerge(mesh, band, 2);
     return true;
+}
+
+} // namespace
+
+bool canMerge(const Mesh& mesh, VertexHandle u, VertexHandle w, double minSeparation)
+{
+    std::vector<Triangle> band;
+    return findMergeBand(mesh, u, w, minSeparation, band);
+}
+
+bool merge(Mesh& mesh, VertexHandle u, VertexHandle w, double minSeparation)
+{
+    // (One band search: canMerge() and then the band again searched every zip twice more.)
+    std::vector<Triangle> band;
+    return findMergeBand(mesh, u, w, minSeparation, band) && mergeWithBand(mesh, u, w, band);
 }
 
 bool canCutTunnel(const Mesh& mesh, VertexHandle u, VertexHandle v, VertexHandle w)
@@ -535,8 +548,12 @@ TopologyStats resolveTopology(Mesh& mesh, const std::vector<CollisionPair>& coll
         ++stats.rejected;
         if (isAlive(mesh, c.u) && isAlive(mesh, c.w)) stats.unresolved.push_back(c);
     };
+    std::vector<Triangle> band;
     for (const CollisionPair& c : order) {
-        if (!isUsable(c.u) || !isUsable(c.w) || !canMerge(mesh, c.u, c.w, options.minSeparation)) { reject(c); continue; }
+        if (!isUsable(c.u) || !isUsable(c.w) || !findMergeBand(mesh, c.u, c.w, options.minSeparation, band)) {
+            reject(c);
+            continue;
+        }
         if (stats.merges + stats.cuts > 0) {
             const double bound = options.neighbourhoodRadius > 0
                                      ? options.neighbourhoodRadius
@@ -545,7 +562,7 @@ TopologyStats resolveTopology(Mesh& mesh, const std::vector<CollisionPair>& coll
         }
         collectLoop(mesh, c.u, a);
         collectLoop(mesh, c.w, b);
-        if (!merge(mesh, c.u, c.w, options.minSeparation)) { reject(c); continue; }
+        if (!mergeWithBand(mesh, c.u, c.w, band)) { reject(c); continue; } // (the mesh is as the band found it)
         ++stats.merges;
         markTouched(c.u);
         markTouched(c.w);
