@@ -421,7 +421,7 @@ bool canMerge(const Mesh& mesh, VertexHandle u, VertexHandle w, double minSepara
 
 bool merge(Mesh& mesh, VertexHandle u, VertexHandle w, double minSeparation)
 {
-    // (One band search: canMerge() and then the band again searched every zip twice more.)
+    // One band search serves the checks and the merge (resolveTopology keeps the band it checked).
     std::vector<Triangle> band;
     return findMergeBand(mesh, u, w, minSeparation, band) && mergeWithBand(mesh, u, w, band);
 }
