@@ -314,17 +314,20 @@ void allCandidates(const StepGeometry& g, const std::vector<int>& live, const st
 
 } // namespace
 
-/// The pairs of the mesh within reach of each other at the last rebuild (positions "anchor"), and
-/// the grids of that time's primitives, grown so that they still cover every primitive whose
-/// vertices have moved less than half the skin since (see SafeStepCache in riemesh/ccd.h).
+/// Every vertex's clearance at the last rebuild (positions "anchor"), and the grids of that time's
+/// primitives, grown so that they still cover every primitive whose vertices have drifted less
+/// than half the clearance radius since (see SafeStepCache in riemesh/ccd.h).
 struct SafeStepCache::Impl {
     bool valid = false;
-    double skin = 0;
+    double radius = 0; ///< the clearance radius C (world units): clearances are measured up to it
     std::size_t vertices0 = 0, faces0 = 0, edges0 = 0; ///< element counts (with deleted ones) at the rebuild
     std::vector<Vec3> anchor;                          ///< positions at the rebuild, by vertex index
     std::vector<std::array<int, 3>> faceAt0;           ///< faces' corners at the rebuild, by face index
     std::vector<std::array<int, 2>> edgeAt0;
-    std::vector<std::array<int, 3>> pairs; ///< (kind, a, b): vertex a - face b, or edge a - edge b (indices)
+    /// By vertex index: how far it may drift from its anchor and stay clean (half its clearance
+    /// less eta: the smallest distance, at the rebuild, of the vertex-face and edge-edge pairs it
+    /// belongs to, at most C), squared.
+    std::vector<double> allowed2;
     detail::PackedBoxGrid vertexGrid, faceGrid, edgeGrid;
     std::vector<int> vertexOf, faceOf, edgeOf; ///< grid item -> element index
     std::size_t rebuilds = 0;
@@ -337,12 +340,18 @@ struct SafeStepCache::Impl {
     std::vector<int> dirtyV, dirtyF, dirtyE;
     std::vector<Box6> dirtyBox;
     detail::PackedBoxGrid dirtyGrid;
-    std::vector<std::vector<std::array<int, 3>>> pairLists;
+    struct Near { ///< a pair closer than C at the rebuild: its four vertices and distance
+        std::array<int, 4> v;
+        double d;
+    };
+    std::vector<std::vector<Near>> nearLists;
+    std::vector<Near> near;
+    std::vector<double> clearance;
     std::vector<std::vector<Quad>> lists;
 
     void candidates(const Mesh& mesh, const StepGeometry& g, double cell, const SafeStepOptions& options,
                     std::vector<Quad>& out, SafeStepStats& stats);
-    void rebuild(const Mesh& mesh, const std::vector<Vec3>& start, double eta, double cell, double skinFraction);
+    void rebuild(const Mesh& mesh, const std::vector<Vec3>& start, double eta, double cell, double radiusFraction);
     void classify(const Mesh& mesh, const StepGeometry& g);
     void collect(const StepGeometry& g, double cell, std::vector<Quad>& candidates);
 };
@@ -376,15 +385,15 @@ void SafeStepCache::Impl::candidates(const Mesh& mesh, const StepGeometry& g, do
         ++liveEdges;
     }
     // First use, or renumbered (garbage collection: invalidate(), or noticed by the counts):
-    // anchor here. Otherwise anchor again when the primitives out of their skin are too many.
+    // anchor here. Otherwise anchor again when the primitives out of their clearance are too many.
     bool rebuilt = false;
     if (!valid || mesh.n_vertices() < vertices0 || mesh.n_faces() < faces0 || mesh.n_edges() < edges0) {
-        rebuild(mesh, g.start, g.eta, cell, options.skin);
+        rebuild(mesh, g.start, g.eta, cell, options.clearance);
         rebuilt = true;
     }
     classify(mesh, g);
     if (!rebuilt && double(dirtyF.size() + dirtyE.size()) > options.rebuildFraction * double(liveFaces + liveEdges)) {
-        rebuild(mesh, g.start, g.eta, cell, options.skin);
+        rebuild(mesh, g.start, g.eta, cell, options.clearance);
         classify(mesh, g);
         rebuilt = true;
     }
@@ -394,26 +403,26 @@ void SafeStepCache::Impl::candidates(const Mesh& mesh, const StepGeometry& g, do
 }
 
 void SafeStepCache::Impl::rebuild(const Mesh& mesh, const std::vector<Vec3>& start, double eta, double cell,
-                                  double skinFraction)
+                                  double radiusFraction)
 {
     ++rebuilds;
     valid = true;
-    skin = skinFraction * cell;
-    // A clean primitive (vertices within skin / 2 of their anchors at the start and the end of a
-    // step) lies within skin / 2 of its anchored box: grids of boxes grown by that and eta cover
-    // its swept box grown by eta (as allCandidates grows it). The pairs kept are those that could
-    // still come within reach: moving at most `skin` each in a step, after moving at most skin / 2
-    // since the rebuild, two primitives farther apart than 3 skin + eta there never are
-    // (StepGeometry's tests); they are found with query boxes grown by the rest, 2.5 skin.
-    const double keep = (3 * skin + eta) * 1.0001;
-    const double reach = 2.5 * skin + eta;
+    radius = radiusFraction * cell;
+    const double C = radius;
+    // A vertex's clearance k is the smallest distance, here, of the vertex-face and edge-edge pairs
+    // (sharing no vertex) it belongs to, or C if none is closer. While every vertex of a pair stays
+    // within (k - eta) / 2 of its anchor, for its own k, the pair stays farther apart than eta: its
+    // distance here is at least the larger k of its vertices, and each of its two primitives moves
+    // away from where it was by at most the largest drift of its vertices (a point of a face or an
+    // edge is a fixed combination of its vertices). So a pair of clean primitives needs no test.
+    // The grids hold the anchored boxes grown by the largest drift (C / 2) and eta as
+    // allCandidates grows them, so that they cover the swept boxes of every clean primitive.
     vertices0 = mesh.n_vertices();
     faces0 = mesh.n_faces();
     edges0 = mesh.n_edges();
     anchor.assign(start.begin(), start.begin() + std::ptrdiff_t(vertices0));
     faceAt0 = faceNow;
     edgeAt0 = edgeNow;
-    const double grow = 0.5 * skin + eta;
     auto boxAround = [&](const int* v, int k, double grow) {
         constexpr double inf = std::numeric_limits<double>::infinity();
         Box6 b = {inf, inf, inf, -inf, -inf, -inf};
@@ -424,16 +433,17 @@ void SafeStepCache::Impl::rebuild(const Mesh& mesh, const std::vector<Vec3>& sta
             }
         return b;
     };
+    const double faceGrow = 0.5 * C + eta, edgeGrow = 0.5 * C + 0.5 * eta;
     std::vector<Box6>& boxes = dirtyBox; // (a buffer here)
     vertexOf.clear();
     boxes.clear();
     for (auto v : mesh.vertices()) {
         const int i = v.idx();
         vertexOf.push_back(i);
-        boxes.push_back(boxAround(&i, 1, grow));
+        boxes.push_back(boxAround(&i, 1, 0.5 * C));
     }
     vertexGrid.build(boxes, cell);
-    auto anchoredGrid = [&](const auto& corners, std::vector<int>& of, detail::PackedBoxGrid& grid) {
+    auto anchoredGrid = [&](const auto& corners, std::vector<int>& of, detail::PackedBoxGrid& grid, double grow) {
         of.clear();
         boxes.clear();
         for (std::size_t x = 0; x < corners.size(); ++x)
@@ -443,45 +453,54 @@ void SafeStepCache::Impl::rebuild(const Mesh& mesh, const std::vector<Vec3>& sta
             }
         grid.build(boxes, cell);
     };
-    anchoredGrid(faceAt0, faceOf, faceGrid);
-    anchoredGrid(edgeAt0, edgeOf, edgeGrid);
-    pairs.clear();
-    const double keep2 = keep * keep;
-    findInChunks(vertexOf.size(), pairLists, pairs, [&](std::size_t k, std::vector<std::array<int, 3>>& found) {
+    anchoredGrid(faceAt0, faceOf, faceGrid, faceGrow);
+    anchoredGrid(edgeAt0, edgeOf, edgeGrid, edgeGrow);
+    // The pairs closer than C: query boxes grown so that, with the grids' growth, they meet every
+    // primitive whose own box is within C.
+    const double C2 = C * C;
+    near.clear();
+    findInChunks(vertexOf.size(), nearLists, near, [&](std::size_t k, std::vector<Near>& found) {
         const int i = vertexOf[k];
         const Vec3& p = anchor[std::size_t(i)];
-        faceGrid.query(boxAround(&i, 1, reach), [&](int item) {
+        faceGrid.query(boxAround(&i, 1, std::max(0.0, C - faceGrow)), [&](int item) {
             const int f = faceOf[std::size_t(item)];
             const auto& t = faceAt0[std::size_t(f)];
             if (hasCorner(t, i)) return;
-            if (pointTriangleDistanceSquared(p, anchor[std::size_t(t[0])], anchor[std::size_t(t[1])],
-                                             anchor[std::size_t(t[2])]) <= keep2)
-                found.push_back({0, i, f});
+            const double d2 = pointTriangleDistanceSquared(p, anchor[std::size_t(t[0])], anchor[std::size_t(t[1])],
+                                                           anchor[std::size_t(t[2])]);
+            if (d2 < C2) found.push_back({{i, t[0], t[1], t[2]}, std::sqrt(d2)});
         });
     });
-    findInChunks(edgeOf.size(), pairLists, pairs, [&](std::size_t k, std::vector<std::array<int, 3>>& found) {
+    findInChunks(edgeOf.size(), nearLists, near, [&](std::size_t k, std::vector<Near>& found) {
         const int e = edgeOf[k];
         const auto& x = edgeAt0[std::size_t(e)];
-        edgeGrid.query(boxAround(x.data(), 2, reach), [&](int item) { // each pair from its lower item
+        edgeGrid.query(boxAround(x.data(), 2, std::max(0.0, C - edgeGrow)), [&](int item) {
             const int h = edgeOf[std::size_t(item)];
             const auto& y = edgeAt0[std::size_t(h)];
             if (shareVertex(x, y)) return;
-            if (segmentSegmentDistanceSquared(anchor[std::size_t(x[0])], anchor[std::size_t(x[1])],
-                                              anchor[std::size_t(y[0])], anchor[std::size_t(y[1])]) <= keep2)
-                found.push_back({1, e, h});
-        }, int(k));
+            const double d2 = segmentSegmentDistanceSquared(anchor[std::size_t(x[0])], anchor[std::size_t(x[1])],
+                                                            anchor[std::size_t(y[0])], anchor[std::size_t(y[1])]);
+            if (d2 < C2) found.push_back({{x[0], x[1], y[0], y[1]}, std::sqrt(d2)});
+        }, int(k)); // (each pair from its lower item)
     });
+    clearance.assign(vertices0, C);
+    for (const Near& n : near)
+        for (int v : n.v) clearance[std::size_t(v)] = std::min(clearance[std::size_t(v)], n.d);
+    allowed2.assign(vertices0, 0.0);
+    for (std::size_t i = 0; i < vertices0; ++i) {
+        const double drift = 0.5 * (clearance[i] - eta) * (1 - 1e-9);
+        allowed2[i] = drift > 0 ? drift * drift : -1.0; // (-1: never clean)
+    }
 }
 
 void SafeStepCache::Impl::classify(const Mesh& mesh, const StepGeometry& g)
 {
-    const double half2 = 0.25 * skin * skin;
     cleanV.assign(mesh.n_vertices(), 0);
     dirtyV.clear();
     for (auto v : mesh.vertices()) {
         const std::size_t i = std::size_t(v.idx());
-        cleanV[i] = i < vertices0 && (g.start[i] - anchor[i]).squaredNorm() <= half2 &&
-                    (g.end[i] - anchor[i]).squaredNorm() <= half2;
+        cleanV[i] = i < vertices0 && (g.start[i] - anchor[i]).squaredNorm() < allowed2[i] &&
+                    (g.end[i] - anchor[i]).squaredNorm() < allowed2[i];
         if (!cleanV[i]) dirtyV.push_back(int(i));
     }
     auto clean = [&](const int* v, int k) {
@@ -506,21 +525,7 @@ void SafeStepCache::Impl::classify(const Mesh& mesh, const StepGeometry& g)
 
 void SafeStepCache::Impl::collect(const StepGeometry& g, double cell, std::vector<Quad>& candidates)
 {
-    // Clean against clean: the kept pairs.
-    findInChunks(pairs.size(), lists, candidates, [&](std::size_t k, std::vector<Quad>& found) {
-        const auto& p = pairs[k];
-        if (p[0] == 0) {
-            const std::size_t f = std::size_t(p[2]);
-            if (!cleanV[std::size_t(p[1])] || !cleanF[f]) return;
-            if (detail::boxesOverlap(g.vertexBox(p[1]), faceBox[f]) && g.vertexFace(p[1], faceNow[f]))
-                found.push_back(vertexFaceQuad(p[1], faceNow[f]));
-        } else {
-            const std::size_t a = std::size_t(p[1]), b = std::size_t(p[2]);
-            if (!cleanE[a] || !cleanE[b]) return;
-            if (detail::boxesOverlap(edgeBox[a], edgeBox[b]) && g.edgeEdge(edgeNow[a], edgeNow[b]))
-                found.push_back(edgeEdgeQuad(edgeNow, a, b));
-        }
-    });
+    // Clean against clean: nothing to test (see rebuild).
     // Dirty vertices against clean faces (the anchored grid) and dirty faces (a grid of this step).
     dirtyBox.clear();
     for (int f : dirtyF) dirtyBox.push_back(faceBox[std::size_t(f)]);
@@ -625,12 +630,13 @@ SafeStepStats limitStepToCollisionFree(Mesh& mesh, const std::vector<Vec3>& star
     }
     if (faceCount == 0) return stats;
     const double cell = std::max(extent / double(faceCount), 1e-9);
-    // A step whose motions leave the skin of many vertices however they are anchored (a front
-    // travelling, a new level settling) is searched from scratch, and the pairs anchored later.
+    // A step in which many vertices move far (a front travelling, a new level settling) would
+    // leave them out of their clearance however they were anchored: it is searched from scratch,
+    // and the mesh anchored later.
     std::size_t far = 0;
     if (cache) {
-        const double halfSkin = 0.5 * options.skin * cell;
-        for (int i : live) far += reach[std::size_t(i)] > halfSkin;
+        const double farMotion = options.farMotion * cell;
+        for (int i : live) far += reach[std::size_t(i)] > farMotion;
     }
     if (!cache || double(far) > 0.5 * options.rebuildFraction * double(live.size())) {
         if (cache) cache->invalidate();

@@ -374,7 +374,7 @@ void Evolution::updateConvergence()
             return;
         }
         ++mLevel; // the next, finer level starts from this surface
-        mSafeStepCache.invalidate(); // (a new delta: a new skin)
+        mSafeStepCache.invalidate(); // (a new delta: new clearances)
         mLevelStart = total;
     }
 }
