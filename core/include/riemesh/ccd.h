@@ -68,7 +68,7 @@ struct SafeStepStats {
     std::size_t shortened = 0;  ///< vertices whose motion was shortened (or stopped)
     std::size_t stopped = 0;    ///< vertices that do not move this step at all
     int rounds = 0;
-    bool rebuilt = false;   ///< with a cache: its pairs were rebuilt at this step
+    bool rebuilt = false;   ///< with a cache: the mesh was anchored again at this step
     std::size_t dirty = 0;  ///< with a cache: faces and edges searched afresh (out of their skin, or new)
 };
 
@@ -94,7 +94,7 @@ public:
     SafeStepCache(SafeStepCache&&) noexcept;
     SafeStepCache& operator=(SafeStepCache&&) noexcept;
     void invalidate();
-    std::size_t rebuilds() const; ///< times the pairs were built (the first included)
+    std::size_t rebuilds() const; ///< times the mesh was anchored (the first included)
 
     struct Impl;
     Impl& impl() { return *mImpl; } ///< (ccd.cpp's)
@@ -109,7 +109,8 @@ private:
 /// each ends at start + alpha (end - start) with alpha in [0, 1), and its velocity property (if
 /// any) is scaled by alpha. If the start positions are embedded, so are the end positions.
 /// Deterministic. Deleted elements are ignored.
-/// With a cache, the candidate pairs come from it (see SafeStepCache); the result is the same.
+/// With a cache, the candidate pairs come from it (see SafeStepCache): the step is as safe, and may
+/// be shortened differently.
 SafeStepStats limitStepToCollisionFree(Mesh& mesh, const std::vector<Vec3>& start, const SafeStepOptions& options = {},
                                        SafeStepCache* cache = nullptr);
 

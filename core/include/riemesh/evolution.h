@@ -156,7 +156,7 @@ private:
     std::vector<IterationStats> mHistory;
     std::vector<Vec3> mForces;
     std::vector<Vec3> mStepStart; ///< positions before integration (intersectionFree)
-    SafeStepCache mSafeStepCache; ///< the collision-safe step's pairs (intersectionFree)
+    SafeStepCache mSafeStepCache; ///< the collision-safe step's clearances (intersectionFree)
     StopReason mReason = StopReason::Running;
     int mLastTopologyEvent = 0;
     int mLastCut = 0;   ///< iteration of the last tunnel cut (0: none)
