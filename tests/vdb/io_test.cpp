@@ -12,6 +12,7 @@
 #include "riemesh/vdb/volume.h"
 
 #include "corrupt_vdb.h"
+#include "isolated_read.h"
 #include "mesh_invariants.h"
 
 #include <nifti2_io.h>
@@ -25,6 +26,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
+#include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <functional>
@@ -270,6 +272,40 @@ TEST_CASE("vdb: the isolated read hands back the grid unchanged (values, tiles, 
     CHECK(f->getConstAccessor().getValue(Coord(1, 2, 3)) == 0.1f);
     CHECK(f->getConstAccessor().getValue(Coord(9, 0, 0)) == 2.0f);
     CHECK(f->activeVoxelCount() == 1);
+}
+
+TEST_CASE("vdb: a reader's answer whose transform OpenVDB cannot build is refused as corrupt")
+{
+    // The CI fuzz finding of 2026-11-27 (fuzz_vdb_answer): an affine index-to-world matrix, the
+    // identity translated by -5.16e120 along y. Its determinant is 1, but OpenVDB's Transform
+    // simplifies it into a ScaleTranslateMap, whose constructor threw openvdb::ArithmeticError
+    // ("Non-zero scale values required"), which no caller expects. It must end as the refusal
+    // every malformed answer gets.
+    initialize();
+    auto grid = openvdb::FloatGrid::create(0.0f);
+    grid->setName("density");
+    grid->tree().setValueOn(Coord(1, 2, 3), 1.0f);
+    std::string answer = riemesh::vdb::detail::childAnswerOf(*grid);
+    // The header: magic (8 bytes), answer, class (4 each), three counts (8 each), then the
+    // index-to-world Mat4d (row vectors: the translation is row 3) and the map kind (0: affine).
+    constexpr std::size_t kMatrix = 40, kMapKind = kMatrix + 16 * sizeof(double);
+    REQUIRE(answer.size() > kMapKind + 4);
+    // (The grid as written is read back: the offsets are the ones the reader uses.)
+    CHECK(riemesh::vdb::detail::gridFromChildAnswer(answer.data(), answer.size(), "x.vdb", std::uint64_t(256) << 20)
+              ->activeVoxelCount() == 1);
+    const double y = -5.164499756173817e+120;
+    std::memcpy(&answer[kMatrix + 13 * sizeof(double)], &y, sizeof y);
+    const std::uint32_t affine = 0;
+    std::memcpy(&answer[kMapKind], &affine, sizeof affine);
+    std::string message;
+    try {
+        riemesh::vdb::detail::gridFromChildAnswer(answer.data(), answer.size(), "x.vdb", std::uint64_t(256) << 20);
+    } catch (const std::runtime_error& e) {
+        message = e.what();
+    }
+    INFO(message);
+    CHECK(message.find("'x.vdb'") != std::string::npos);
+    CHECK(message.find("transform") != std::string::npos);
 }
 
 TEST_CASE("vdb: a file that overflows a heap buffer inside OpenVDB's reader is refused as corrupt, this process unharmed (issue 17)")

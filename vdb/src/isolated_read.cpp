@@ -260,6 +260,10 @@ openvdb::math::Transform::Ptr transformOf(const Header& h, const std::string& pa
     const bool uniform = diagonal && scale[0] == scale[1] && scale[0] == scale[2];
     const bool translated = translation != m::Vec3d(0);
     m::MapBase::Ptr map;
+    m::Transform::Ptr transform;
+    // (The Transform simplifies an affine map into a scale or a translation map, whose constructors
+    // throw too: a translation of 5e120 made OpenVDB 10.0.1's ScaleTranslateMap throw its
+    // ArithmeticError, which escaped as something other than a refusal.)
     try {
         switch (h.mapKind) {
         case kAffine: map = std::make_shared<m::AffineMap>(mat); break;
@@ -280,11 +284,12 @@ openvdb::math::Transform::Ptr transformOf(const Header& h, const std::string& pa
             break;
         default: break;
         }
+        if (map) transform = std::make_shared<m::Transform>(map);
     } catch (const std::exception& e) {
         throw unreadable(path, std::string("an invalid transform: ") + e.what());
     }
     if (!map) throw unreadable(path, "a transform whose type and matrix disagree");
-    return std::make_shared<m::Transform>(map);
+    return transform;
 }
 
 // ---- The child. ----
