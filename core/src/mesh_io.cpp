@@ -820,6 +820,17 @@ Mesh meshFromData(const MeshData& data)
         if (fan != corners[std::size_t(v.idx())]) ++nonManifold;
     }
     if (nonManifold > 0) fail("mesh has " + std::to_string(nonManifold) + " non-manifold vertices");
+    // A closed manifold vertex with two neighbours sits on two faces with the same three corners (a
+    // "pillow": e.g. an STL facet that repeats a corner, fanned into a triangle and its reverse).
+    std::size_t pinched = 0;
+    for (auto v : mesh.vertices()) {
+        std::size_t neighbours = 0;
+        for (auto w : mesh.vv_range(v)) { (void)w; ++neighbours; }
+        pinched += neighbours < 3;
+    }
+    if (pinched > 0)
+        fail("mesh has " + std::to_string(pinched) +
+             " vertices with fewer than 3 neighbours (two faces on the same three corners)");
 
     if (signedVolume(mesh) < 0) buildMesh(data, true, mesh); // inside-out file: make normals point out
     prepareMesh(mesh);

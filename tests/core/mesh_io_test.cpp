@@ -466,6 +466,18 @@ TEST_CASE("mesh_io: bad input files throw errors that name the file and the prob
         writeBytes(folder.file("huge.stl"), stl + std::string(100, '\0'));
         expectError("huge.stl", "truncated");
     }
+    SUBCASE("two faces on the same three corners (a pillow)")
+    {
+        // Closed and manifold, but each vertex has two neighbours. The CI fuzz finding of
+        // 2026-11-27 (fuzz_mesh_read): an ascii STL facet with a repeated corner, fanned into a
+        // triangle and its reverse; the same as an OBJ.
+        writeBytes(folder.file("pillow.stl"), "solid t\n facet normal 0 0 1\n  outer loop\n   vertex 0 0 0\n"
+                                              "   vertex 5 1 0\n   vertex 1 0 0\n   vertex 5 1 0\n  endloop\n"
+                                              " endfacet\nendsolid t\n");
+        expectError("pillow.stl", "fewer than 3 neighbours");
+        writeBytes(folder.file("pillow.obj"), "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\nf 1 3 2\n");
+        expectError("pillow.obj", "fewer than 3 neighbours");
+    }
     SUBCASE("nan coordinate")
     {
         writeBytes(folder.file("nan.obj"), "v 0 0 0\nv 1 0 0\nv nan 1 0\nv 0 0 1\nf 1 3 2\nf 1 2 4\nf 1 4 3\nf 2 3 4\n");
