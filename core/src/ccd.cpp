@@ -319,7 +319,6 @@ void allCandidates(const StepGeometry& g, const std::vector<int>& live, const st
 /// than half the clearance radius since (see SafeStepCache in riemesh/ccd.h).
 struct SafeStepCache::Impl {
     bool valid = false;
-    double radius = 0; ///< the clearance radius C (world units): clearances are measured up to it
     std::size_t vertices0 = 0, faces0 = 0, edges0 = 0; ///< element counts (with deleted ones) at the rebuild
     std::vector<Vec3> anchor;                          ///< positions at the rebuild, by vertex index
     std::vector<std::array<int, 3>> faceAt0;           ///< faces' corners at the rebuild, by face index
@@ -407,8 +406,7 @@ void SafeStepCache::Impl::rebuild(const Mesh& mesh, const std::vector<Vec3>& sta
 {
     ++rebuilds;
     valid = true;
-    radius = radiusFraction * cell;
-    const double C = radius;
+    const double C = radiusFraction * cell; // the clearance radius: clearances are measured up to it
     // A vertex's clearance k is the smallest distance, here, of the vertex-face and edge-edge pairs
     // (sharing no vertex) it belongs to, or C if none is closer. While every vertex of a pair stays
     // within (k - eta) / 2 of its anchor, for its own k, the pair stays farther apart than eta: its

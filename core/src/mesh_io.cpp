@@ -813,21 +813,17 @@ Mesh meshFromData(const MeshData& data)
     std::vector<std::size_t> corners(mesh.n_vertices(), 0);
     for (auto f : mesh.faces())
         for (auto v : mesh.fv_range(f)) ++corners[std::size_t(v.idx())];
-    std::size_t nonManifold = 0;
+    // A closed manifold vertex has as many neighbours as faces in its fan; one with two sits on two
+    // faces with the same three corners (a "pillow": e.g. an STL facet that repeats a corner,
+    // fanned into a triangle and its reverse).
+    std::size_t nonManifold = 0, pinched = 0;
     for (auto v : mesh.vertices()) {
         std::size_t fan = 0;
         for (auto f : mesh.vf_range(v)) { (void)f; ++fan; }
         if (fan != corners[std::size_t(v.idx())]) ++nonManifold;
+        pinched += fan < 3;
     }
     if (nonManifold > 0) fail("mesh has " + std::to_string(nonManifold) + " non-manifold vertices");
-    // A closed manifold vertex with two neighbours sits on two faces with the same three corners (a
-    // "pillow": e.g. an STL facet that repeats a corner, fanned into a triangle and its reverse).
-    std::size_t pinched = 0;
-    for (auto v : mesh.vertices()) {
-        std::size_t neighbours = 0;
-        for (auto w : mesh.vv_range(v)) { (void)w; ++neighbours; }
-        pinched += neighbours < 3;
-    }
     if (pinched > 0)
         fail("mesh has " + std::to_string(pinched) +
              " vertices with fewer than 3 neighbours (two faces on the same three corners)");

@@ -290,7 +290,7 @@ TEST_CASE("vdb: a reader's answer whose transform OpenVDB cannot build is refuse
     // index-to-world Mat4d (row vectors: the translation is row 3) and the map kind (0: affine).
     constexpr std::size_t kMatrix = 40, kMapKind = kMatrix + 16 * sizeof(double);
     REQUIRE(answer.size() > kMapKind + 4);
-    // (The grid as written is read back: the offsets are the ones the reader uses.)
+    // (Unchanged, the answer is a grid: what follows fails only because of the patched matrix.)
     CHECK(riemesh::vdb::detail::gridFromChildAnswer(answer.data(), answer.size(), "x.vdb", std::uint64_t(256) << 20)
               ->activeVoxelCount() == 1);
     const double y = -5.164499756173817e+120;
