@@ -411,6 +411,14 @@ std::string pipelineStatsJson(const PipelineResult& r, const PipelineRecord& rec
                               {"ms", s.milliseconds}});
     j["iterations"] = std::move(iterations);
     const auto& e = r.evolution;
+    IterationStats::Phases phases; // where the evolution's time went, summed over the iterations
+    for (const auto& s : e.iterations) {
+        phases.forces += s.phases.forces;
+        phases.integration += s.phases.integration;
+        phases.regularity += s.phases.regularity;
+        phases.collisions += s.phases.collisions;
+        phases.topology += s.phases.topology;
+    }
     j["summary"] = {{"vertices", r.topology.vertices},
                     {"faces", r.topology.faces},
                     {"components", r.topology.components},
@@ -426,6 +434,11 @@ std::string pipelineStatsJson(const PipelineResult& r, const PipelineRecord& rec
                                        {"smooth", r.seconds.smooth}, {"levels", r.seconds.levels},
                                        {"convert", r.seconds.convert}}},
                     {"evolve_seconds", r.seconds.evolve},
+                    {"evolve_phase_seconds", {{"forces", 1e-3 * phases.forces},
+                                              {"integration", 1e-3 * phases.integration},
+                                              {"regularity", 1e-3 * phases.regularity},
+                                              {"collisions", 1e-3 * phases.collisions},
+                                              {"topology", 1e-3 * phases.topology}}},
                     {"write_seconds", record.writeSeconds},
                     {"malloc_huge_pages", mallocHugePages()},
                     {"sharpened_vertices", r.sharpened},
