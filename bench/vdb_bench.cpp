@@ -18,6 +18,7 @@
 // This is the only bench file that includes OpenVDB (each such file costs ~35 s to compile).
 #include "bench_common.h"
 #include "../vdb/apps/cli.h"
+#include "riemesh/mesh_io.h"
 #include "riemesh/vdb/io.h"
 #include "riemesh/vdb/level_set.h"
 #include "riemesh/vdb/metric_grid.h"
@@ -235,6 +236,7 @@ void writeObj(const std::string& path, const Soup& soup)
 
 struct Args {
     std::string mode, image, grid, reference, referenceGrid = "sdf", objDir, label;
+    std::vector<std::string> meshes; ///< error: the mesh files to measure
     std::optional<double> iso;
     int gaussianWidth = 1, gaussianIterations = 1; // width 0: no smoothing
     std::vector<double> adaptivities;
@@ -246,9 +248,12 @@ const char* kUsage =
     "usage: vdb_bench mesh IMAGE [--grid G] [--iso V] [--reference FILE.vdb[:GRID]] [--gaussian W:I|none]\n"
     "                 [--adaptivity A,B,...] [--mc] [--obj-dir DIR] [--label TEXT] [--threads N]\n"
     "       vdb_bench metric IMAGE [--grid G] [--threads N] [--repeat R]\n"
+    "       vdb_bench error REFERENCE.vdb MESH... [--grid G] [--label TEXT]\n"
     "mesh: OpenVDB volumeToMesh (after tools::Filter::gaussian(W, I), default 1:1) at each adaptivity\n"
     "      (default 0) and, with --mc, marching cubes on the same smoothed image; one CSV row per mesh.\n"
-    "metric: seconds of the structure tensor + metric (vdb2mesh's defaults) with N threads (0: all).\n";
+    "metric: seconds of the structure tensor + metric (vdb2mesh's defaults) with N threads (0: all).\n"
+    "error: each mesh file (.obj .ply .off .stl) against REFERENCE's signed distance grid (default \"sdf\";\n"
+    "      exact for vdbphantom's shapes), measured as vdb2mesh --reference does; one CSV row per mesh.\n";
 
 Args parseArgs(int argc, char** argv)
 {
@@ -299,8 +304,16 @@ Args parseArgs(int argc, char** argv)
         else if (!f.empty() && f[0] == '-') throw BadInput("unknown option '" + f + "' (see --help)");
         else positional.push_back(f);
     }
+    if (positional.size() >= 3 && positional[0] == "error") {
+        a.mode = "error";
+        a.image = positional[1];
+        if (a.grid.empty()) a.grid = a.referenceGrid;
+        a.meshes.assign(positional.begin() + 2, positional.end());
+        if (a.label.empty()) a.label = a.image;
+        return a;
+    }
     if (positional.size() != 2 || (positional[0] != "mesh" && positional[0] != "metric"))
-        throw BadInput("expected 'mesh IMAGE' or 'metric IMAGE' (see --help)");
+        throw BadInput("expected 'mesh IMAGE', 'metric IMAGE' or 'error REFERENCE MESH...' (see --help)");
     a.mode = positional[0];
     a.image = positional[1];
     if (a.adaptivities.empty() && !a.mc) a.adaptivities.push_back(0.0);
@@ -406,11 +419,39 @@ int runMetric(const Args& a, const openvdb::FloatGrid::Ptr& image)
     return 0;
 }
 
+/// error: every mesh file against the reference's distance (the image read is the sdf grid).
+int runError(const Args& a, const openvdb::FloatGrid::Ptr& sdf)
+{
+    std::printf("%s", bench::kMeshCsvHeader);
+    for (const std::string& path : a.meshes) {
+        const Mesh mesh = [&] {
+            try {
+                return readMesh(path);
+            } catch (const std::exception& e) {
+                throw BadInput(e.what());
+            }
+        }();
+        std::vector<openvdb::Vec3d> points;
+        std::vector<openvdb::Vec3I> triangles;
+        for (auto v : mesh.vertices()) {
+            const auto& p = mesh.point(v);
+            points.emplace_back(p[0], p[1], p[2]);
+        }
+        for (auto f : mesh.faces()) {
+            const auto [x, y, z] = faceVertices(mesh, f);
+            triangles.emplace_back(unsigned(x.idx()), unsigned(y.idx()), unsigned(z.idx()));
+        }
+        bench::printMeshCsvRow(a.label, "file", path, points, triangles, sdf.get(), 0, 0);
+    }
+    return 0;
+}
+
 } // namespace
 
 int main(int argc, char** argv)
 {
     return bench::benchMain("vdb_bench", argc, argv, parseArgs, [](const Args& args, const openvdb::FloatGrid::Ptr& image) {
+        if (args.mode == "error") return runError(args, image);
         return args.mode == "mesh" ? runMesh(args, image) : runMetric(args, image);
     });
 }
