@@ -7,8 +7,10 @@
 #include "detail/triangle_intersection.h"
 
 #include "detail/predicates.h"
+#include "riemesh/ccd.h"
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 
 #include <Eigen/Core>
@@ -192,6 +194,83 @@ TriangleContact classifyTriangles(const std::array<int, 3>& vi, const TriangleRe
         if (std::find(vi.begin(), vi.end(), vj[x]) == vi.end()) freeJ = x;
     }
     return sharedEdgeFold(rotated(ti, (freeI + 1) % 3), tj.p[freeJ]) ? TriangleContact::EdgeFold : TriangleContact::None;
+}
+
+bool separatedBeyondShared(const std::array<int, 3>& ia, const double* const a[3], const std::array<int, 3>& ib,
+                           const double* const b[3], double r)
+{
+    using V = Eigen::Vector3d;
+    auto at = [](const double* p) { return V(p[0], p[1], p[2]); };
+    // Which corners are shared: sa[i] = the corner of b equal to a's corner i, or -1.
+    int sa[3] = {-1, -1, -1}, shared = 0;
+    bool inB[3] = {false, false, false};
+    for (int i = 0; i < 3; ++i)
+        for (int j = 0; j < 3; ++j)
+            if (ia[std::size_t(i)] == ib[std::size_t(j)]) sa[i] = j, inB[j] = true, ++shared;
+    if (shared == 3) return false;
+    // The plane: through `origin`, normal m (unit); a's free corners must be beyond r on the side
+    // m points to, b's on the other.
+    V origin, m;
+    double scale = 0; // the coordinates' magnitude, for the rounding bound
+    for (int i = 0; i < 3; ++i)
+        for (int k = 0; k < 3; ++k) scale = std::max({scale, std::abs(a[i][k]), std::abs(b[i][k])});
+    if (shared == 0) {
+        const V ca = (at(a[0]) + at(a[1]) + at(a[2])) / 3.0, cb = (at(b[0]) + at(b[1]) + at(b[2])) / 3.0;
+        m = ca - cb;
+        origin = 0.5 * (ca + cb);
+    } else if (shared == 1) {
+        int s = 0;
+        while (sa[s] < 0) ++s;
+        origin = at(a[s]);
+        // Away from b's free corners, toward a's: the difference of the unit directions from the
+        // shared corner to the midpoints of the free edges.
+        const V ua = (0.5 * (at(a[(s + 1) % 3]) + at(a[(s + 2) % 3])) - origin).normalized();
+        V mb = V::Zero();
+        for (int j = 0; j < 3; ++j)
+            if (!inB[j]) mb += 0.5 * at(b[j]);
+        const V ub = (mb - origin).normalized();
+        m = ua - ub;
+    } else {
+        int free = 0, freeB = 0;
+        while (sa[free] >= 0) ++free;
+        while (inB[freeB]) ++freeB;
+        const int e0 = (free + 1) % 3;
+        origin = at(a[e0]);
+        const V e = at(a[(free + 2) % 3]) - origin;
+        const double e2 = e.squaredNorm();
+        if (!(e2 > 0)) return false;
+        // Each free corner's direction from the shared edge, orthogonal to it; the plane contains
+        // the edge and bisects the two.
+        auto across = [&](const V& p) {
+            const V d = p - origin;
+            return V(d - (d.dot(e) / e2) * e).normalized();
+        };
+        m = across(at(a[free])) - across(at(b[freeB]));
+    }
+    const double len = m.norm();
+    if (!(len > 0) || !std::isfinite(len)) return false;
+    m /= len;
+    // Rounding of the margins (a few operations on coordinates of magnitude `scale`), with room.
+    const double need = r * (1 + 1e-9) + 1e-12 * (scale + 1);
+    for (int i = 0; i < 3; ++i)
+        if (sa[i] < 0 && !(m.dot(at(a[i]) - origin) > need)) return false;
+    for (int j = 0; j < 3; ++j)
+        if (!inB[j] && !(-m.dot(at(b[j]) - origin) > need)) return false;
+    if (shared == 2) {
+        // Each edge from a free corner to one end of the shared edge, against the one from the
+        // other free corner to the other end: they share no vertex, and both reach the plane (at
+        // different points), so their distance is measured.
+        int free = 0, freeB = 0;
+        while (sa[free] >= 0) ++free;
+        while (inB[freeB]) ++freeB;
+        for (int k = 1; k <= 2; ++k) {
+            const int ea = (free + k) % 3;       // a's corner at one end of the shared edge
+            const int eb = (free + 3 - k) % 3;   // a's corner at the other end: b's corner sa[eb]
+            const double d2 = segmentSegmentDistanceSquared(at(a[free]), at(a[ea]), at(b[freeB]), at(b[sa[eb]]));
+            if (!(std::sqrt(d2) > need)) return false;
+        }
+    }
+    return true;
 }
 
 } // namespace riemesh::detail

@@ -39,4 +39,17 @@ TriangleContact classifyTriangles(const std::array<int, 3>& ia, const TriangleRe
 /// Closed non-degenerate triangles a and b (no shared vertex assumed) have a common point. Exact.
 bool trianglesMeet(const TriangleRef& a, const TriangleRef& b);
 
+/// A cheap proof that triangles a and b (corners 3 doubles each, vertex ids `ia`, `ib`; equal ids
+/// = the same vertex) meet only in what they share and stay farther than `r` apart elsewhere: a
+/// plane through what they share (their shared edge or vertex; between their centroids when they
+/// share none) with every other corner of a beyond r on one side and every other corner of b
+/// beyond r on the other. Then classifyTriangles says None (for non-degenerate triangles) and every
+/// vertex-face and edge-edge pair of the two that shares no vertex is farther apart than r (points
+/// of a triangle are convex combinations of its corners: none is nearer the plane than its nearest
+/// corner), except, for a shared edge, the two pairs of edges that reach it at opposite ends: their
+/// distances are measured. False proves nothing (the exact tests decide). The margins are measured
+/// in floating point and required to exceed r by more than their rounding.
+bool separatedBeyondShared(const std::array<int, 3>& ia, const double* const a[3], const std::array<int, 3>& ib,
+                           const double* const b[3], double r);
+
 } // namespace riemesh::detail
