@@ -277,7 +277,7 @@ IterationStats Evolution::step()
     // O(n) component pass runs only for a while after one.
     int removed = 0;
     if (mLastCut > 0 && iteration - mLastCut <= 60) {
-        // On a coarse level a small object's surface (its coarse image holds it, grown by a block)
+        // On a coarse level a small object's surface (its coarse image holds it, grown by half a block)
         // may be as small as a few coarse edges allow: a speck by that level's measure, but a surface
         // the finer levels refine. Specks are judged by the finest level's delta.
         const bool coarse = mLevel + 1 < int(mLevels.size());

@@ -52,7 +52,7 @@ void printVdb2MeshUsage(std::FILE* out)
         "  --max-vertices N     vertex cap: a mesh growing past N vertices stops the run with an error\n"
         "                       and no output (default %llu)\n"
         "  --levels L           coarse-to-fine: converge first with delta x 2^L on 2^L-voxel blocks of the\n"
-        "                       image (their maxima, grown by a block: the object's thin parts kept),\n"
+        "                       image (their maxima, grown by half a block: thin parts kept),\n"
         "                       then halve down to the image itself; auto (default) leaves the coarsest\n"
         "                       level about 16 edges across the image; 0 = the image only\n"
         "  --intersection-free  no iteration may make faces cross: continuous collision detection of\n"

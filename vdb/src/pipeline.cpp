@@ -289,7 +289,7 @@ PipelineResult meshVolume(Volume& volume, const PipelineOptions& options)
     switch (options.init.kind) {
     case InitialSurface::Kind::Box: {
         // A box around each part of the object (found on 2^L-voxel blocks, or 2-voxel ones without
-        // levels), a coarsest cell beyond the coarsest image's object, which is dilated by one.
+        // levels), a coarsest cell beyond the coarsest image's object, which is grown by half of one.
         std::vector<Box3> parts = volume.objectBoxes();
         const double grow = levels.size() > 1 ? 2.0 * levels.front().scale * h : 0.0;
         if (levels.size() == 1)

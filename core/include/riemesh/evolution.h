@@ -105,7 +105,7 @@ struct EvolutionStats {
 ///
 /// A schedule runs its levels coarsest first; each starts from the surface the one before converged
 /// to. For the result to be what the finest level alone would give, every coarse image should hold
-/// the finest one's object inside its own (e.g. block maxima of a bright object, dilated by a block:
+/// the finest one's object inside its own (e.g. block maxima of a bright object, grown by half a block:
 /// vdb::Volume::buildLevels), so that each level's surface still encloses the next one's and the
 /// mesh keeps deflating onto it from outside, as from the initial box; thin parts and narrow gaps that
 /// only the finest level resolves then come out as they do without a schedule.

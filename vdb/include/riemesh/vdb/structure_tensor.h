@@ -38,9 +38,10 @@ openvdb::FloatGrid::Ptr gaussianSmooth(const openvdb::FloatGrid& image, double s
 
 /// Coarse images for a coarse-to-fine schedule (riemesh::EvolutionLevel), level 1 to `levels`
 /// (<= 12): level l is the largest value of `image` (the smallest when `objectBrighter` is false:
-/// level sets, dark objects) over blocks of 2^l voxels, then over each block and its 26 neighbours,
-/// on a grid of 2^l-voxel cells (the transform says where). Its object thus holds the image's own
-/// object, grown by about one block, so a surface converged on a coarse level encloses the finer
+/// level sets, dark objects) over blocks of 2^l voxels and a border of 2^(l-1) voxels around each
+/// (windows of 4^3 cells of level l-1 at stride 2), on a grid of 2^l-voxel cells (the transform
+/// says where). Its object thus holds the image's own object, grown by about half a block, so a
+/// surface converged on a coarse level encloses the finer
 /// levels' and the finest's objects (thin plates, narrow gaps and all). Sparse like the rest: leaf
 /// nodes near the image's leaves are computed by bricks, constant tiles map to tiles. Named
 /// riemesh::kLevelGridPrefix + l, the image's class and background.

@@ -69,7 +69,7 @@ public:
     void smooth(double sigmaVoxels);
 
     /// Coarse images of the current image for a coarse-to-fine schedule (vdb::coarseLevels: block
-    /// extremes over 2^l voxels, dilated by a block, so that each holds the image's object),
+    /// extremes over 2^l voxels, grown by half a block, so that each holds the image's object),
     /// levels 1..`levels`; nano() and exportNanoVDB() carry them. 0 removes them; smooth() and
     /// downsample() drop them.
     /// With a finite `iso`, stops below a level where some part of the object is less than
