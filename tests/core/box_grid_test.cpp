@@ -13,6 +13,7 @@
 
 using riemesh::detail::Box6;
 using riemesh::detail::boxesOverlap;
+using riemesh::detail::CentreGrid;
 using riemesh::detail::PackedBoxGrid;
 
 namespace {
@@ -135,5 +136,52 @@ TEST_CASE("hashed box grid: items given room up front are reported only once ins
             reported += got.size();
         }
         CHECK(reported > 300);
+    }
+}
+
+TEST_CASE("centre grid: boxes entered by their centres, moved and re-entered, against brute force")
+{
+    // Every overlapping box reported exactly once and nothing else: boxes narrower and wider than
+    // 0.9 cell (the wide ones are kept apart), near and far from the origin, then a third of them
+    // entered again with new boxes (moved to another cell, moved within theirs, turned wide or
+    // narrow), as the edit guard re-enters the faces an edit changed. Queries include huge ones.
+    std::mt19937 rng(11);
+    std::uniform_int_distribution<int> pick(0, 399);
+    for (double centre : {0.0, -350.0, 1.0e6}) {
+        for (double cell : {0.5, 2.0, 9.0}) {
+            // Mostly boxes just under the 0.9-cell limit (the ones a query finds only through the
+            // half cell it is grown by), some small, some wider than a cell.
+            std::uniform_real_distribution<double> nearLimit(0.7 * cell, 0.9 * cell);
+            auto sized = [&](double size) {
+                if (size > 0) return randomBox(rng, centre, 30.0, size);
+                Box6 b = randomBox(rng, centre, 30.0, 1.0);
+                for (int k = 0; k < 3; ++k) b[k + 3] = b[k] + nearLimit(rng);
+                return b;
+            };
+            std::vector<Box6> boxes;
+            for (int i = 0; i < 400; ++i) boxes.push_back(sized(i % 40 == 0 ? 20.0 : (i % 4 == 0 ? 1.0 : 0.0)));
+            CentreGrid grid;
+            grid.reset(cell, boxes.size());
+            for (std::size_t i = 0; i < boxes.size(); ++i) grid.insert(int(i), boxes[i]);
+            for (int round = 0; round < 2; ++round) {
+                for (int q = 0; q < 400; ++q) {
+                    const Box6 query = q % 50 == 0 ? Box6{-1e300, -1e300, -1e300, 1e300, 1e300, 1e300}
+                                                   : randomBox(rng, centre, 32.0, q % 25 == 0 ? 40.0 : (q % 2 ? 1.0 : 0.01));
+                    std::vector<int> got, want;
+                    grid.query(query, [&](int item) { got.push_back(item); });
+                    std::sort(got.begin(), got.end());
+                    for (std::size_t i = 0; i < boxes.size(); ++i)
+                        if (boxesOverlap(query, boxes[i])) want.push_back(int(i));
+                    CAPTURE(q);
+                    CHECK(got == want);
+                }
+                for (int k = 0; k < 130; ++k) { // re-enter a third (some twice)
+                    const int i = pick(rng);
+                    const double size = k % 13 == 0 ? 20.0 : (k % 3 == 0 ? 0.05 : (k % 2 ? 1.0 : 0.0));
+                    boxes[std::size_t(i)] = k % 5 == 0 ? boxes[std::size_t(i)] : sized(size);
+                    grid.insert(i, boxes[std::size_t(i)]);
+                }
+            }
+        }
     }
 }

@@ -160,6 +160,126 @@ private:
     std::vector<int> mLarge; ///< items whose box spans too many cells: tested by every query
 };
 
+/// A hashed grid of boxes entered once each, in the cell of its box's centre (cubic cells of side
+/// cellSize): building costs one entry per item, where BoxGrid enters an item in every cell its box
+/// overlaps. For the edit guard, which enters every face of the mesh at each regularity step and
+/// then asks a few hundred queries. A box at most 0.9 cell wide on every axis lies within half a
+/// cell of its centre, so a query visits the cells of its box grown by half a cell; wider boxes are
+/// kept apart and tested by every query. query(box, f) calls f(item) once for every item whose
+/// current box overlaps `box`. Entering an item again (its box changed) replaces its box; an entry
+/// left in a cell its centre has left is skipped. Deterministic. Buffers are kept between resets.
+class CentreGrid {
+public:
+    /// Empties the grid: cells of side cellSize (> 0, world units), buckets for about `items`.
+    void reset(double cellSize, std::size_t items)
+    {
+        mCell = cellSize;
+        mInvCell = 1.0 / cellSize;
+        std::size_t buckets = 256;
+        while (buckets < 2 * items && buckets < (std::size_t(1) << 26)) buckets *= 2;
+        mBits = 0;
+        while ((std::size_t(1) << mBits) < buckets) ++mBits;
+        mHead.assign(buckets, -1);
+        mEntries.clear();
+        mEntries.reserve(items + items / 4 + 16);
+        mItems.assign(items, Item{});
+        mWide.clear();
+    }
+
+    /// Enters `item` with `box` (replaces the box it had).
+    void insert(int item, const Box6& box)
+    {
+        if (std::size_t(item) >= mItems.size()) mItems.resize(std::size_t(item) + 1);
+        Item& it = mItems[std::size_t(item)];
+        it.box = box;
+        std::uint64_t key = 0;
+        bool narrow = true;
+        for (int k = 0; k < 3; ++k) {
+            const double centre = 0.5 * (box[k] + box[k + 3]) * mInvCell;
+            // (At most 0.9 of a cell: the half cell a query is grown by then leaves room for the
+            // rounding of the centre.)
+            narrow = narrow && box[k + 3] - box[k] <= 0.9 * mCell && std::abs(centre) < 1e15;
+            if (narrow) key |= (std::uint64_t(floorToInt(centre)) & kCoordMask) << (42 - 21 * k);
+        }
+        if (!narrow) {
+            if (!it.listed) mWide.push_back(item);
+            it.listed = it.wide = true;
+            it.entered = false;
+            return;
+        }
+        it.wide = false;
+        if (it.entered && it.key == key) return; // already in that cell
+        it.key = key;
+        it.entered = true;
+        std::int32_t& head = mHead[bucket(key)];
+        mEntries.push_back({key, item, head});
+        head = std::int32_t(mEntries.size() - 1);
+    }
+
+    /// Calls f(item) for every item whose box overlaps `q`.
+    template <class F>
+    void query(const Box6& q, F&& f) const
+    {
+        for (const int item : mWide) {
+            const Item& it = mItems[std::size_t(item)];
+            if (it.wide && boxesOverlap(q, it.box)) f(item);
+        }
+        std::array<std::int64_t, 6> c{};
+        for (int k = 0; k < 6; ++k) {
+            const double s = (q[k] + (k < 3 ? -0.5 : 0.5) * mCell) * mInvCell;
+            if (!(std::abs(s) < 1e15)) { // a query beyond the cells' range: every item
+                for (std::size_t i = 0; i < mItems.size(); ++i)
+                    if (mItems[i].entered && boxesOverlap(q, mItems[i].box)) f(int(i));
+                return;
+            }
+            c[std::size_t(k)] = floorToInt(s);
+        }
+        if (c[3] - c[0] > kMaxSpan || c[4] - c[1] > kMaxSpan || c[5] - c[2] > kMaxSpan) {
+            for (std::size_t i = 0; i < mItems.size(); ++i)
+                if (mItems[i].entered && boxesOverlap(q, mItems[i].box)) f(int(i));
+            return;
+        }
+        for (std::int64_t x = c[0]; x <= c[3]; ++x)
+            for (std::int64_t y = c[1]; y <= c[4]; ++y)
+                for (std::int64_t z = c[2]; z <= c[5]; ++z) {
+                    const std::uint64_t key = ((std::uint64_t(x) & kCoordMask) << 42) |
+                                              ((std::uint64_t(y) & kCoordMask) << 21) | (std::uint64_t(z) & kCoordMask);
+                    for (std::int32_t e = mHead[bucket(key)]; e >= 0; e = mEntries[std::size_t(e)].next) {
+                        const Entry& entry = mEntries[std::size_t(e)];
+                        if (entry.key != key) continue;
+                        const Item& it = mItems[std::size_t(entry.item)];
+                        if (it.entered && it.key == key && boxesOverlap(q, it.box)) f(entry.item);
+                    }
+                }
+    }
+
+private:
+    struct Entry {
+        std::uint64_t key;
+        std::int32_t item;
+        std::int32_t next;
+    };
+    struct Item {
+        Box6 box{};
+        std::uint64_t key = 0;
+        bool entered = false; ///< has an entry in the cell `key`
+        bool wide = false;    ///< wider than 0.9 cell: tested by every query
+        bool listed = false;  ///< in mWide
+    };
+    static constexpr std::uint64_t kCoordMask = (std::uint64_t(1) << 21) - 1;
+    /// Queries spanning more cells than this on an axis test every item instead.
+    static constexpr std::int64_t kMaxSpan = 64;
+
+    std::size_t bucket(std::uint64_t key) const { return std::size_t((key * 0x9E3779B97F4A7C15ull) >> (64 - mBits)); }
+
+    double mCell = 1.0, mInvCell = 1.0;
+    int mBits = 8;
+    std::vector<std::int32_t> mHead;
+    std::vector<Entry> mEntries;
+    std::vector<Item> mItems;
+    std::vector<int> mWide; ///< items ever wide, once each (those still wide are tested by every query)
+};
+
 /// A BoxGrid built once from all its boxes, laid out for speed (the collision-safe step queries
 /// it once per vertex and edge of the mesh, every iteration): cells are numbered relative to the
 /// lowest one, and a cell's bucket is its column's hash plus its z, so that the cells of a query

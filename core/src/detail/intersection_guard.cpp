@@ -34,8 +34,11 @@ void IntersectionGuard::build()
         mBoxes[std::size_t(f.idx())] = b;
         ++count;
     }
-    // (Room made up front: the grid and its buffers are new at every regularity step.)
-    mGrid.reset(count ? std::max(extent / double(count), 1e-9) : 1.0, 4 * count + 64, mMesh.n_faces());
+    // Cells of twice the faces' mean extent: few faces are wider than 0.9 cell (those are tested by
+    // every query), and a query visits about 3 cells per axis. Head MRI, guarded, 1 thread: the
+    // edit guard's instructions 1.11 G with a BoxGrid (each face in every cell its box meets,
+    // cells of the mean extent) -> 0.61 G (cells of 1.5 / 3 mean extents: 0.75 / 0.66 G).
+    mGrid.reset(count ? std::max(2.0 * extent / double(count), 1e-9) : 1.0, mMesh.n_faces());
     for (auto f : mMesh.faces()) mGrid.insert(f.idx(), mBoxes[std::size_t(f.idx())]);
 }
 

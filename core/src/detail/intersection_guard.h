@@ -1,8 +1,10 @@
 // detail/intersection_guard.h: "does this edit make faces cross?" for the regularity step's
-// collapses and flips (issue 17). A hashed grid of the faces' boxes (built at the first question,
-// kept up to date by update() after every edit) gives the faces near the triangles an edit would
-// make; exact triangle-triangle tests (detail/triangle_intersection.h, shared vertices classified
-// as in findSelfIntersections) decide. Private to core/src.
+// collapses and flips (issue 17). A hashed grid of the faces' boxes (detail::CentreGrid: each
+// face in the cell of its box's centre; built at the first question, kept up to date by update()
+// after every edit) gives the faces near the triangles an edit would make; a separating plane
+// (detail::separatedBeyondShared) settles most, exact triangle-triangle tests
+// (detail/triangle_intersection.h, shared vertices classified as in findSelfIntersections) decide
+// the others. Private to core/src.
 #pragma once
 
 #include "riemesh/mesh.h"
@@ -42,7 +44,7 @@ private:
 
     const Mesh& mMesh;
     double mMinSeparation = 0;
-    BoxGrid mGrid;
+    CentreGrid mGrid;
     bool mBuilt = false;
     std::vector<Box6> mBoxes; // scratch
     std::vector<Triangle> mMade; // scratch
