@@ -211,6 +211,11 @@ bool separatedBeyondShared(const std::array<int, 3>& ia, const double* const a[3
     // The plane: through `origin`, normal m (unit); a's free corners must be beyond r on the side
     // m points to, b's on the other.
     V origin, m;
+    int free = 0, freeB = 0; // with a shared edge: the corner of a, and of b, off it
+    if (shared == 2) {
+        while (sa[free] >= 0) ++free;
+        while (inB[freeB]) ++freeB;
+    }
     double scale = 0; // the coordinates' magnitude, for the rounding bound
     for (int i = 0; i < 3; ++i)
         for (int k = 0; k < 3; ++k) scale = std::max({scale, std::abs(a[i][k]), std::abs(b[i][k])});
@@ -231,9 +236,6 @@ bool separatedBeyondShared(const std::array<int, 3>& ia, const double* const a[3
         const V ub = (mb - origin).normalized();
         m = ua - ub;
     } else {
-        int free = 0, freeB = 0;
-        while (sa[free] >= 0) ++free;
-        while (inB[freeB]) ++freeB;
         const int e0 = (free + 1) % 3;
         origin = at(a[e0]);
         const V e = at(a[(free + 2) % 3]) - origin;
@@ -260,9 +262,6 @@ bool separatedBeyondShared(const std::array<int, 3>& ia, const double* const a[3
         // Each edge from a free corner to one end of the shared edge, against the one from the
         // other free corner to the other end: they share no vertex, and both reach the plane (at
         // different points), so their distance is measured.
-        int free = 0, freeB = 0;
-        while (sa[free] >= 0) ++free;
-        while (inB[freeB]) ++freeB;
         for (int k = 1; k <= 2; ++k) {
             const int ea = (free + k) % 3;       // a's corner at one end of the shared edge
             const int eb = (free + 3 - k) % 3;   // a's corner at the other end: b's corner sa[eb]
