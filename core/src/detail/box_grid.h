@@ -35,6 +35,26 @@ inline bool boxesOverlap(const Box6& x, const Box6& y)
     return x[0] <= y[3] && y[0] <= x[3] && x[1] <= y[4] && y[1] <= x[4] && x[2] <= y[5] && y[2] <= x[5];
 }
 
+/// A cell's key: its coordinates modulo 2^21 (cells 2^21 apart share a key: the grids check the
+/// boxes), 21 bits each, z in the low bits.
+inline std::uint64_t packCell(std::int64_t x, std::int64_t y, std::int64_t z)
+{
+    constexpr std::uint64_t m = (std::uint64_t(1) << 21) - 1;
+    return ((std::uint64_t(x) & m) << 42) | ((std::uint64_t(y) & m) << 21) | (std::uint64_t(z) & m);
+}
+
+/// The chained hash tables of BoxGrid and CentreGrid: log2 of a power-of-two bucket count of at
+/// least 256, about twice `entries` (at most 2^26), and a key's bucket among 2^bits.
+inline int bucketBits(std::size_t entries)
+{
+    std::size_t buckets = 256;
+    while (buckets < 2 * entries && buckets < (std::size_t(1) << 26)) buckets *= 2;
+    int bits = 0;
+    while ((std::size_t(1) << bits) < buckets) ++bits;
+    return bits;
+}
+inline std::size_t hashCell(std::uint64_t key, int bits) { return std::size_t((key * 0x9E3779B97F4A7C15ull) >> (64 - bits)); }
+
 class BoxGrid {
 public:
     /// Empties the grid; cells of side cellSize (world units, > 0), buckets and room for about
@@ -42,11 +62,8 @@ public:
     void reset(double cellSize, std::size_t entries, std::size_t items = 0)
     {
         mInvCell = 1.0 / cellSize;
-        std::size_t buckets = 256;
-        while (buckets < 2 * entries && buckets < (std::size_t(1) << 26)) buckets *= 2;
-        mBits = 0;
-        while ((std::size_t(1) << mBits) < buckets) ++mBits;
-        mHead.assign(buckets, -1);
+        mBits = bucketBits(entries);
+        mHead.assign(std::size_t(1) << mBits, -1);
         mEntries.clear();
         mEntries.reserve(entries);
         mBox.assign(items, kEmpty);
@@ -71,7 +88,7 @@ public:
         for (std::int64_t x = c[0]; x <= c[3]; ++x)
             for (std::int64_t y = c[1]; y <= c[4]; ++y)
                 for (std::int64_t z = c[2]; z <= c[5]; ++z) {
-                    const std::uint64_t key = pack(x, y, z);
+                    const std::uint64_t key = packCell(x, y, z);
                     std::int32_t& head = mHead[bucket(key)];
                     mEntries.push_back({key, item, head});
                     head = std::int32_t(mEntries.size() - 1);
@@ -104,7 +121,7 @@ public:
         for (std::int64_t x = c[0]; x <= c[3]; ++x)
             for (std::int64_t y = c[1]; y <= c[4]; ++y)
                 for (std::int64_t z = c[2]; z <= c[5]; ++z) {
-                    const std::uint64_t key = pack(x, y, z);
+                    const std::uint64_t key = packCell(x, y, z);
                     for (std::int32_t e = mHead[bucket(key)]; e >= 0; e = mEntries[std::size_t(e)].next) {
                         const Entry& entry = mEntries[std::size_t(e)];
                         if (entry.key != key) continue;
@@ -141,15 +158,7 @@ private:
             if (c[k] > c[k + 3] || c[k + 3] - c[k] > kMaxSpan) return false;
         return true;
     }
-    static std::uint64_t pack(std::int64_t x, std::int64_t y, std::int64_t z)
-    {
-        constexpr std::uint64_t m = (std::uint64_t(1) << 21) - 1;
-        return ((std::uint64_t(x) & m) << 42) | ((std::uint64_t(y) & m) << 21) | (std::uint64_t(z) & m);
-    }
-    std::size_t bucket(std::uint64_t key) const
-    {
-        return std::size_t((key * 0x9E3779B97F4A7C15ull) >> (64 - mBits));
-    }
+    std::size_t bucket(std::uint64_t key) const { return hashCell(key, mBits); }
 
     double mInvCell = 1.0;
     int mBits = 6;
@@ -175,11 +184,8 @@ public:
     {
         mCell = cellSize;
         mInvCell = 1.0 / cellSize;
-        std::size_t buckets = 256;
-        while (buckets < 2 * items && buckets < (std::size_t(1) << 26)) buckets *= 2;
-        mBits = 0;
-        while ((std::size_t(1) << mBits) < buckets) ++mBits;
-        mHead.assign(buckets, -1);
+        mBits = bucketBits(items);
+        mHead.assign(std::size_t(1) << mBits, -1);
         mEntries.clear();
         mEntries.reserve(items + items / 4 + 16);
         mItems.assign(items, Item{});
@@ -192,15 +198,16 @@ public:
         if (std::size_t(item) >= mItems.size()) mItems.resize(std::size_t(item) + 1);
         Item& it = mItems[std::size_t(item)];
         it.box = box;
-        std::uint64_t key = 0;
+        std::int64_t cell[3] = {0, 0, 0};
         bool narrow = true;
         for (int k = 0; k < 3; ++k) {
             const double centre = 0.5 * (box[k] + box[k + 3]) * mInvCell;
             // (At most 0.9 of a cell: the half cell a query is grown by then leaves room for the
             // rounding of the centre.)
             narrow = narrow && box[k + 3] - box[k] <= 0.9 * mCell && std::abs(centre) < 1e15;
-            if (narrow) key |= (std::uint64_t(floorToInt(centre)) & kCoordMask) << (42 - 21 * k);
+            if (narrow) cell[k] = floorToInt(centre);
         }
+        const std::uint64_t key = packCell(cell[0], cell[1], cell[2]);
         if (!narrow) {
             if (!it.listed) mWide.push_back(item);
             it.listed = it.wide = true;
@@ -225,16 +232,13 @@ public:
             if (it.wide && boxesOverlap(q, it.box)) f(item);
         }
         std::array<std::int64_t, 6> c{};
-        for (int k = 0; k < 6; ++k) {
+        bool cells = true; // false: a query beyond the cells' range, or too wide: every item
+        for (int k = 0; k < 6 && cells; ++k) {
             const double s = (q[k] + (k < 3 ? -0.5 : 0.5) * mCell) * mInvCell;
-            if (!(std::abs(s) < 1e15)) { // a query beyond the cells' range: every item
-                for (std::size_t i = 0; i < mItems.size(); ++i)
-                    if (mItems[i].entered && boxesOverlap(q, mItems[i].box)) f(int(i));
-                return;
-            }
-            c[std::size_t(k)] = floorToInt(s);
+            cells = std::abs(s) < 1e15;
+            if (cells) c[std::size_t(k)] = floorToInt(s);
         }
-        if (c[3] - c[0] > kMaxSpan || c[4] - c[1] > kMaxSpan || c[5] - c[2] > kMaxSpan) {
+        if (!cells || c[3] - c[0] > kMaxSpan || c[4] - c[1] > kMaxSpan || c[5] - c[2] > kMaxSpan) {
             for (std::size_t i = 0; i < mItems.size(); ++i)
                 if (mItems[i].entered && boxesOverlap(q, mItems[i].box)) f(int(i));
             return;
@@ -242,8 +246,7 @@ public:
         for (std::int64_t x = c[0]; x <= c[3]; ++x)
             for (std::int64_t y = c[1]; y <= c[4]; ++y)
                 for (std::int64_t z = c[2]; z <= c[5]; ++z) {
-                    const std::uint64_t key = ((std::uint64_t(x) & kCoordMask) << 42) |
-                                              ((std::uint64_t(y) & kCoordMask) << 21) | (std::uint64_t(z) & kCoordMask);
+                    const std::uint64_t key = packCell(x, y, z);
                     for (std::int32_t e = mHead[bucket(key)]; e >= 0; e = mEntries[std::size_t(e)].next) {
                         const Entry& entry = mEntries[std::size_t(e)];
                         if (entry.key != key) continue;
@@ -266,11 +269,10 @@ private:
         bool wide = false;    ///< wider than 0.9 cell: tested by every query
         bool listed = false;  ///< in mWide
     };
-    static constexpr std::uint64_t kCoordMask = (std::uint64_t(1) << 21) - 1;
     /// Queries spanning more cells than this on an axis test every item instead.
     static constexpr std::int64_t kMaxSpan = 64;
 
-    std::size_t bucket(std::uint64_t key) const { return std::size_t((key * 0x9E3779B97F4A7C15ull) >> (64 - mBits)); }
+    std::size_t bucket(std::uint64_t key) const { return hashCell(key, mBits); }
 
     double mCell = 1.0, mInvCell = 1.0;
     int mBits = 8;
@@ -457,11 +459,7 @@ private:
     }
     /// Cell coordinates relative to the origin (0 <= x, y, z < 2^21 for the boxes built; a query's
     /// are clamped to that range), z in the low bits.
-    static std::uint64_t pack(std::int64_t x, std::int64_t y, std::int64_t z)
-    {
-        return ((std::uint64_t(x) & kCoordMask) << 42) | ((std::uint64_t(y) & kCoordMask) << 21) |
-               (std::uint64_t(z) & kCoordMask);
-    }
+    static std::uint64_t pack(std::int64_t x, std::int64_t y, std::int64_t z) { return packCell(x, y, z); }
     /// The column's hash plus z: consecutive cells along z are consecutive buckets.
     std::size_t bucketOf(std::uint64_t key) const
     {
