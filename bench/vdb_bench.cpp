@@ -433,14 +433,7 @@ int runError(const Args& a, const openvdb::FloatGrid::Ptr& sdf)
         }();
         std::vector<openvdb::Vec3d> points;
         std::vector<openvdb::Vec3I> triangles;
-        for (auto v : mesh.vertices()) {
-            const auto& p = mesh.point(v);
-            points.emplace_back(p[0], p[1], p[2]);
-        }
-        for (auto f : mesh.faces()) {
-            const auto [x, y, z] = faceVertices(mesh, f);
-            triangles.emplace_back(unsigned(x.idx()), unsigned(y.idx()), unsigned(z.idx()));
-        }
+        vdb::meshArrays(mesh, points, triangles);
         bench::printMeshCsvRow(a.label, "file", path, points, triangles, sdf.get(), 0, 0);
     }
     return 0;

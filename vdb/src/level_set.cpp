@@ -29,9 +29,6 @@ namespace riemesh::vdb {
 
 using openvdb::Vec3d;
 
-namespace {
-
-/// The live vertices (world space) and faces of `mesh` as index arrays.
 void meshArrays(const Mesh& mesh, std::vector<Vec3d>& points, std::vector<openvdb::Vec3I>& triangles)
 {
     std::vector<int> index(mesh.n_vertices(), -1);
@@ -49,6 +46,8 @@ void meshArrays(const Mesh& mesh, std::vector<Vec3d>& points, std::vector<openvd
         if (n == 3) triangles.push_back(t);
     }
 }
+
+namespace {
 
 /// World points to the index space that meshToVolume's adapter expects.
 std::vector<openvdb::Vec3s> toIndexSpace(const std::vector<Vec3d>& world, const openvdb::math::Transform& xform)

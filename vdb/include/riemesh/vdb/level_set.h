@@ -11,6 +11,11 @@
 
 namespace riemesh::vdb {
 
+/// The live vertices (world space) and faces of `mesh` appended to index arrays (vertices
+/// renumbered without the deleted ones), as surfaceError's array form and OpenVDB's mesh tools
+/// take them.
+void meshArrays(const Mesh& mesh, std::vector<openvdb::Vec3d>& points, std::vector<openvdb::Vec3I>& triangles);
+
 /// A narrow-band level set of the closed mesh `mesh` (world space) named "surface", class level set,
 /// with `transform` (voxel size and origin; affine transforms are fine) and a band of `halfWidth`
 /// voxels on each side (meshToLevelSet).
