@@ -87,6 +87,7 @@ public:
           mHi(options.zeta * options.delta)
     {
         if (options.intersectionFree) mGuard = std::make_unique<detail::IntersectionGuard>(mesh, options.minSeparation);
+        mSpeculate = options.speculate;
     }
 
     /// Euclidean length of edge e (world units).
@@ -259,6 +260,15 @@ public:
             mValence[std::size_t(n->idx())] = int(mMesh.valence(*n));
             touch(*n);
         }
+        // The speculated collapse verdicts this edit may have changed (see speculateCollapses): v
+        // moved and the rings of v and its neighbours changed, which the verdicts of every edge
+        // with an end within two edges of v read.
+        if (mCollapseMarks.size() < mMesh.n_vertices()) mCollapseMarks.resize(mMesh.n_vertices(), 0);
+        mCollapseMarks[std::size_t(v.idx())] = 1;
+        for (auto n = mMesh.cvv_begin(v); n.is_valid(); ++n) {
+            mCollapseMarks[std::size_t(n->idx())] = 1;
+            for (auto m = mMesh.cvv_begin(*n); m.is_valid(); ++m) mCollapseMarks[std::size_t(m->idx())] = 1;
+        }
     }
 
     /// Splits long edges at their midpoints until none is left (or a safety cap). Among the edges
@@ -304,6 +314,7 @@ public:
     int collapseShortEdges()
     {
         std::make_heap(mShort.begin(), mShort.end(), shorterFirst);
+        if (mSpeculate) speculateCollapses();
         mCollapses = 0;
         while (!mShort.empty()) {
             std::pop_heap(mShort.begin(), mShort.end(), shorterFirst);
@@ -455,9 +466,11 @@ private:
     {
         HalfedgeHandle h = mMesh.halfedge_handle(e, 0);
         const VertexHandle u = mMesh.from_vertex_handle(h), v = mMesh.to_vertex_handle(h);
+        bool capped = false;
         for (int attempt = 0;; ++attempt) {
             const VertexHandle w = sharedOutsideNeighbour(mMesh, h);
             if (!w.is_valid()) break;
+            capped = true;
             const CapResult cap = dissolveSmallCap(h, w);
             if (cap == CapResult::NotACap) recordTunnel(u, v, w);
             if (cap != CapResult::Dissolved || attempt == 2) return;
@@ -466,21 +479,86 @@ private:
             if (!h.is_valid()) return;
             if (!(length(mMesh.edge_handle(h)) < mLo)) return;
         }
-        const Vec3 pu = position(mMesh, u), pv = position(mMesh, v);
-        const HalfedgeHandle o = mMesh.opposite_halfedge_handle(h);
-        // (halfedge to collapse, target): the midpoint, then v kept in place, then u kept in place.
-        const std::array<std::pair<HalfedgeHandle, Vec3>, 3> options = {
-            {{h, Vec3(0.5 * (pu + pv))}, {h, pv}, {o, pu}}};
-        for (const auto& [hh, target] : options) {
-            const detail::CollapseObstacles obstacles = detail::collapseObstacles(mMesh, hh, target);
+        const auto options = collapseOptions(h);
+        const std::array<Verdict, 3>* known = capped ? nullptr : speculated(e, u, v);
+        for (std::size_t k = 0; k < options.size(); ++k) {
+            const auto& [hh, target] = options[k];
+            Verdict verdict = known ? (*known)[k] : Verdict::Unknown;
+            if (verdict == Verdict::Unknown) verdict = collapseVerdict(u, v, hh, target);
             // Topological obstacles do not depend on the target: give up at once.
-            if (obstacles & ~detail::kCollapseGeometry) return;
-            if (obstacles) continue;
-            if (!keepsEdgesShortEnough(u, v, target)) continue;
+            if (verdict == Verdict::Abort) return;
+            if (verdict == Verdict::Skip) continue;
             if (mGuard && !mGuard->isCollapseSafe(hh, target)) continue;
             collapseAndRequeue(hh, target);
             return;
         }
+    }
+
+    /// What collapseShortEdge makes of one of its options before the intersection guard.
+    enum class Verdict : std::int8_t { Unknown, Abort, Skip, Pass };
+
+    /// The collapses of edge u-v (h from u to v) collapseShortEdge tries, in order, as (halfedge to
+    /// collapse, target): into the midpoint, into v kept in place, into u kept in place.
+    std::array<std::pair<HalfedgeHandle, Vec3>, 3> collapseOptions(HalfedgeHandle h) const
+    {
+        const Vec3 pu = position(mMesh, mMesh.from_vertex_handle(h)), pv = position(mMesh, mMesh.to_vertex_handle(h));
+        return {{{h, Vec3(0.5 * (pu + pv))}, {h, pv}, {mMesh.opposite_halfedge_handle(h), pu}}};
+    }
+
+    /// Abort: a topological obstacle (no target can help); Skip: this target folds or degenerates a
+    /// face, or makes an edge too long; Pass: only the intersection guard is left to ask. Reads
+    /// u, v, their neighbours and the neighbours' valences, nothing else of the mesh.
+    Verdict collapseVerdict(VertexHandle u, VertexHandle v, HalfedgeHandle hh, const Vec3& target) const
+    {
+        const detail::CollapseObstacles obstacles = detail::collapseObstacles(mMesh, hh, target);
+        if (obstacles & ~detail::kCollapseGeometry) return Verdict::Abort;
+        if (obstacles || !keepsEdgesShortEnough(u, v, target)) return Verdict::Skip;
+        return Verdict::Pass;
+    }
+
+    /// The verdicts of the queued collapses, in parallel, on the mesh as the collapse pass finds it
+    /// (most queued edges are refused, many of them at every iteration, and the verdicts are most
+    /// of the pass's work). The pass then takes an edge's verdicts as long as no collapse has
+    /// changed what they read: collapses mark the two rings around the vertex they keep (see
+    /// updateRing), and the verdicts of edge u-v read only u, v and their neighbours' positions and
+    /// rings, so they stand while neither u nor v is marked. The same collapses as deciding each
+    /// edge in turn, for any thread count. Each edge's options are decided up to the first that
+    /// passes or aborts (the rest stay Unknown, decided in turn if the guard refuses it).
+    void speculateCollapses()
+    {
+        ++mSpeculation;
+        mSpeculatedAt.resize(mMesh.n_edges(), 0);
+        mVerdicts.resize(mMesh.n_edges());
+        mCollapseMarks.assign(mMesh.n_vertices(), 0);
+        mSpeculated.clear();
+        for (const QueuedEdge& item : mShort) {
+            const std::size_t i = std::size_t(item.edge);
+            if (mMesh.status(EdgeHandle(item.edge)).deleted() || mSpeculatedAt[i] == mSpeculation) continue;
+            mSpeculatedAt[i] = mSpeculation;
+            mSpeculated.push_back(item.edge);
+        }
+        detail::parallelFor(0, mSpeculated.size(), kGrain / 4, [&](std::size_t k) {
+            const EdgeHandle e(mSpeculated[k]);
+            const HalfedgeHandle h = mMesh.halfedge_handle(e, 0);
+            const VertexHandle u = mMesh.from_vertex_handle(h), v = mMesh.to_vertex_handle(h);
+            std::array<Verdict, 3>& verdicts = mVerdicts[std::size_t(e.idx())];
+            verdicts.fill(Verdict::Unknown);
+            if (sharedOutsideNeighbour(mMesh, h).is_valid()) return; // (a cap or a tunnel: decided in turn)
+            const auto options = collapseOptions(h);
+            for (std::size_t i = 0; i < options.size(); ++i) {
+                verdicts[i] = collapseVerdict(u, v, options[i].first, options[i].second);
+                if (verdicts[i] != Verdict::Skip) break;
+            }
+        });
+    }
+
+    /// Edge e's verdicts if they still stand (see speculateCollapses), else nullptr.
+    const std::array<Verdict, 3>* speculated(EdgeHandle e, VertexHandle u, VertexHandle v) const
+    {
+        const std::size_t i = std::size_t(e.idx());
+        if (i >= mSpeculatedAt.size() || mSpeculatedAt[i] != mSpeculation) return nullptr;
+        if (mCollapseMarks[std::size_t(u.idx())] || mCollapseMarks[std::size_t(v.idx())]) return nullptr;
+        return &mVerdicts[i];
     }
 
     /// Collapses hh into `target` (guards already checked) and queues the short edges it made.
@@ -660,6 +738,14 @@ private:
     std::vector<int> mFlipQueue;      ///< edges around the flips of a sweep, ahead of it (min-heap)
     int mCollapses = 0;             ///< collapses of the current collapse stage
     std::vector<VertexHandle> mCap; ///< the vertices of a small cap being dissolved
+    // speculateCollapses: by edge idx(), the verdicts and the speculation they belong to; by
+    // vertex idx(), marked by the collapses since.
+    std::vector<std::array<Verdict, 3>> mVerdicts;
+    std::vector<std::uint32_t> mSpeculatedAt;
+    std::uint32_t mSpeculation = 0;
+    std::vector<char> mCollapseMarks;
+    std::vector<int> mSpeculated;
+    bool mSpeculate = true;
     std::unique_ptr<detail::IntersectionGuard> mGuard; ///< options.intersectionFree
 };
 
