@@ -85,6 +85,19 @@ void collectPrimitives(const Mesh& mesh, std::vector<std::array<int, 3>>& faces,
 /// Queries per chunk of the broad phase (see findInChunks).
 constexpr std::size_t kQueryChunk = 512;
 
+/// Elements per chunk of the per-element passes (forLive).
+constexpr std::size_t kPassGrain = 2048;
+
+/// fn(i) for every index i in [0, count) whose element (Handle(i)) is not deleted, in parallel
+/// chunks: fn may write only what index i owns.
+template <class Handle, class Fn>
+void forLive(const Mesh& mesh, std::size_t count, Fn&& fn)
+{
+    detail::parallelFor(0, count, kPassGrain, [&](std::size_t i) {
+        if (!mesh.status(Handle(int(i))).deleted()) fn(i);
+    });
+}
+
 } // namespace
 
 double pointTriangleDistanceSquared(const Vec3& p, const Vec3& a, const Vec3& b, const Vec3& c)
@@ -286,7 +299,7 @@ void allCandidates(const StepGeometry& g, const std::vector<int>& live, const st
                    std::vector<Quad>& candidates)
 {
     faceBox.resize(faces.size());
-    for (std::size_t f = 0; f < faces.size(); ++f) faceBox[f] = g.faceBox(faces[f]);
+    detail::parallelFor(0, faces.size(), kPassGrain, [&](std::size_t f) { faceBox[f] = g.faceBox(faces[f]); });
     grid.build(faceBox, cell);
     findInChunks(live.size(), lists, candidates, [&](std::size_t k, std::vector<Quad>& found) {
         const int i = live[k];
@@ -299,7 +312,7 @@ void allCandidates(const StepGeometry& g, const std::vector<int>& live, const st
         });
     });
     edgeBox.resize(edges.size());
-    for (std::size_t e = 0; e < edges.size(); ++e) edgeBox[e] = g.edgeBox(edges[e]);
+    detail::parallelFor(0, edges.size(), kPassGrain, [&](std::size_t e) { edgeBox[e] = g.edgeBox(edges[e]); });
     grid.build(edgeBox, cell);
     findInChunks(edges.size(), lists, candidates, [&](std::size_t e, std::vector<Quad>& found) {
         const auto& x = edges[e];
@@ -367,22 +380,20 @@ void SafeStepCache::Impl::candidates(const Mesh& mesh, const StepGeometry& g, do
 {
     faceNow.assign(mesh.n_faces(), {-1, -1, -1});
     faceBox.resize(mesh.n_faces());
-    std::size_t liveFaces = 0, liveEdges = 0;
-    for (auto f : mesh.faces()) {
-        const std::size_t i = std::size_t(f.idx());
-        faceNow[i] = faceIds(mesh, f);
+    forLive<FaceHandle>(mesh, mesh.n_faces(), [&](std::size_t i) {
+        faceNow[i] = faceIds(mesh, FaceHandle(int(i)));
         faceBox[i] = g.faceBox(faceNow[i]);
-        ++liveFaces;
-    }
+    });
     edgeNow.assign(mesh.n_edges(), {-1, -1});
     edgeBox.resize(mesh.n_edges());
-    for (auto e : mesh.edges()) {
-        const std::size_t i = std::size_t(e.idx());
-        const HalfedgeHandle h = mesh.halfedge_handle(e, 0);
+    forLive<EdgeHandle>(mesh, mesh.n_edges(), [&](std::size_t i) {
+        const HalfedgeHandle h = mesh.halfedge_handle(EdgeHandle(int(i)), 0);
         edgeNow[i] = {mesh.from_vertex_handle(h).idx(), mesh.to_vertex_handle(h).idx()};
         edgeBox[i] = g.edgeBox(edgeNow[i]);
-        ++liveEdges;
-    }
+    });
+    std::size_t liveFaces = 0, liveEdges = 0;
+    for (const auto& t : faceNow) liveFaces += t[0] >= 0;
+    for (const auto& x : edgeNow) liveEdges += x[0] >= 0;
     // First use, or renumbered (garbage collection: invalidate(), or noticed by the counts):
     // anchor here. Otherwise anchor again when the primitives out of their clearance are too many.
     bool rebuilt = false;
@@ -493,14 +504,15 @@ void SafeStepCache::Impl::rebuild(const Mesh& mesh, const std::vector<Vec3>& sta
 
 void SafeStepCache::Impl::classify(const Mesh& mesh, const StepGeometry& g)
 {
+    // The flags in parallel, then the dirty lists in index order.
     cleanV.assign(mesh.n_vertices(), 0);
-    dirtyV.clear();
-    for (auto v : mesh.vertices()) {
-        const std::size_t i = std::size_t(v.idx());
+    forLive<VertexHandle>(mesh, mesh.n_vertices(), [&](std::size_t i) {
         cleanV[i] = i < vertices0 && (g.start[i] - anchor[i]).squaredNorm() < allowed2[i] &&
                     (g.end[i] - anchor[i]).squaredNorm() < allowed2[i];
-        if (!cleanV[i]) dirtyV.push_back(int(i));
-    }
+    });
+    dirtyV.clear();
+    for (std::size_t i = 0; i < cleanV.size(); ++i)
+        if (!cleanV[i] && !mesh.status(VertexHandle(int(i))).deleted()) dirtyV.push_back(int(i));
     auto clean = [&](const int* v, int k) {
         for (int i = 0; i < k; ++i)
             if (!cleanV[std::size_t(v[i])]) return false;
@@ -510,12 +522,13 @@ void SafeStepCache::Impl::classify(const Mesh& mesh, const StepGeometry& g)
     auto classifyAll = [&](const auto& now, const auto& at0, std::size_t count0, std::vector<char>& cleanOf,
                            std::vector<int>& dirty) {
         cleanOf.assign(now.size(), 0);
+        detail::parallelFor(0, now.size(), kPassGrain, [&](std::size_t x) {
+            if (now[x][0] >= 0) // (live)
+                cleanOf[x] = x < count0 && now[x] == at0[x] && clean(now[x].data(), int(now[x].size()));
+        });
         dirty.clear();
-        for (std::size_t x = 0; x < now.size(); ++x) {
-            if (now[x][0] < 0) continue; // (deleted)
-            cleanOf[x] = x < count0 && now[x] == at0[x] && clean(now[x].data(), int(now[x].size()));
-            if (!cleanOf[x]) dirty.push_back(int(x));
-        }
+        for (std::size_t x = 0; x < now.size(); ++x)
+            if (now[x][0] >= 0 && !cleanOf[x]) dirty.push_back(int(x));
     };
     classifyAll(faceNow, faceAt0, faces0, cleanF, dirtyF);
     classifyAll(edgeNow, edgeAt0, edges0, cleanE, dirtyE);
@@ -587,7 +600,7 @@ SafeStepStats limitStepToCollisionFree(Mesh& mesh, const std::vector<Vec3>& star
         std::vector<std::array<int, 3>> faces;
         std::vector<std::array<int, 2>> edges;
         std::vector<Box6> faceBox, edgeBox;
-        std::vector<double> reach, alpha, factor;
+        std::vector<double> reach, alpha, factor, extents;
         std::vector<int> touched;
         std::vector<Quad> candidates;
         std::vector<std::vector<Quad>> lists;
@@ -602,30 +615,34 @@ SafeStepStats limitStepToCollisionFree(Mesh& mesh, const std::vector<Vec3>& star
     end.resize(n);
     moves.assign(n, 0);
     reach.assign(n, 0.0);
-    live.clear();
-    bool any = false;
-    for (auto v : mesh.vertices()) {
-        const std::size_t i = std::size_t(v.idx());
-        live.push_back(v.idx());
-        end[i] = position(mesh, v);
+    forLive<VertexHandle>(mesh, n, [&](std::size_t i) {
+        end[i] = position(mesh, VertexHandle(int(i)));
         moves[i] = end[i] != start[i];
         if (moves[i]) reach[i] = (end[i] - start[i]).norm();
-        any = any || moves[i];
-    }
+    });
+    live.clear();
+    bool any = false;
+    for (std::size_t i = 0; i < n; ++i)
+        if (!mesh.status(VertexHandle(int(i))).deleted()) {
+            live.push_back(int(i));
+            any = any || moves[i];
+        }
     if (!any) return stats;
     const StepGeometry g{start, end, reach, eta};
 
     std::vector<Quad>& candidates = scratch.candidates;
     candidates.clear();
-    // The grids' cells: the faces' mean extent (swept boxes of this step).
+    // The grids' cells: the faces' mean extent (swept boxes of this step; summed in index order).
+    std::vector<double>& extents = scratch.extents;
+    extents.assign(mesh.n_faces(), -1.0);
+    forLive<FaceHandle>(mesh, mesh.n_faces(), [&](std::size_t f) {
+        const Box6 b = g.faceBox(faceIds(mesh, FaceHandle(int(f))));
+        extents[f] = std::max({b[3] - b[0], b[4] - b[1], b[5] - b[2]});
+    });
     double extent = 0;
     std::size_t faceCount = 0;
-    for (auto f : mesh.faces()) {
-        const std::array<int, 3> t = faceIds(mesh, f);
-        const Box6 b = g.faceBox(t);
-        extent += std::max({b[3] - b[0], b[4] - b[1], b[5] - b[2]});
-        ++faceCount;
-    }
+    for (const double x : extents)
+        if (x >= 0) extent += x, ++faceCount;
     if (faceCount == 0) return stats;
     const double cell = std::max(extent / double(faceCount), 1e-9);
     // A step in which many vertices move far (a front travelling, a new level settling) would

@@ -2,6 +2,7 @@
 
 #include "riemesh/ccd.h"
 
+#include "detail/parallel.h"
 #include "detail/triangle_intersection.h"
 
 #include <algorithm>
@@ -25,13 +26,17 @@ Box6 IntersectionGuard::faceBox(FaceHandle f) const
 void IntersectionGuard::build()
 {
     mBuilt = true;
-    double extent = 0;
+    // The boxes in parallel, their extents summed in face order.
     mBoxes.assign(mMesh.n_faces(), Box6{});
+    parallelFor(0, mMesh.n_faces(), 2048, [&](std::size_t i) {
+        const FaceHandle f{int(i)};
+        if (!mMesh.status(f).deleted()) mBoxes[i] = faceBox(f);
+    });
+    double extent = 0;
     std::size_t count = 0;
     for (auto f : mMesh.faces()) {
-        const Box6 b = faceBox(f);
+        const Box6& b = mBoxes[std::size_t(f.idx())];
         extent += std::max({b[3] - b[0], b[4] - b[1], b[5] - b[2]});
-        mBoxes[std::size_t(f.idx())] = b;
         ++count;
     }
     // Cells of twice the faces' mean extent: few faces are wider than 0.9 cell (those are tested by
