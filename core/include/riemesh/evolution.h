@@ -84,7 +84,7 @@ struct EvolutionOptions {
     /// and a face, or two edges, would come within minSeparation * delta of each other; collapses
     /// and flips that would make faces cross are refused (RegularityOptions::intersectionFree), as
     /// are tunnel cuts. An embedded initial surface then stays embedded. Off by default until its
-    /// cost comes down: it makes the phantom's and the head's evolution 1.9-2.4x slower (issue 17; bench 6260155).
+    /// cost comes down: it makes the phantom's and the head's evolution 1.9-2.0x slower (issue 17; bench d3e260f).
     bool intersectionFree = false;
     double minSeparation = 1e-3; ///< eta, a fraction of delta
     /// Called after every iteration; return false to interrupt.
