@@ -85,17 +85,14 @@ void collectPrimitives(const Mesh& mesh, std::vector<std::array<int, 3>>& faces,
 /// Queries per chunk of the broad phase (see findInChunks).
 constexpr std::size_t kQueryChunk = 512;
 
-/// Elements per chunk of the per-element passes (forLive).
+/// Elements per chunk of the per-element passes.
 constexpr std::size_t kPassGrain = 2048;
 
-/// fn(i) for every index i in [0, count) whose element (Handle(i)) is not deleted, in parallel
-/// chunks: fn may write only what index i owns.
+/// detail::forLive in chunks of kPassGrain.
 template <class Handle, class Fn>
 void forLive(const Mesh& mesh, std::size_t count, Fn&& fn)
 {
-    detail::parallelFor(0, count, kPassGrain, [&](std::size_t i) {
-        if (!mesh.status(Handle(int(i))).deleted()) fn(i);
-    });
+    detail::forLive<Handle>(mesh, count, kPassGrain, fn);
 }
 
 } // namespace

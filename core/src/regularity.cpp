@@ -260,10 +260,10 @@ public:
             mValence[std::size_t(n->idx())] = int(mMesh.valence(*n));
             touch(*n);
         }
-        // The speculated collapse verdicts this edit may have changed (see speculateCollapses): v
-        // moved and the rings of v and its neighbours changed, which the verdicts of every edge
-        // with an end within two edges of v read.
-        if (mCollapseMarks.size() < mMesh.n_vertices()) mCollapseMarks.resize(mMesh.n_vertices(), 0);
+        // During a speculating collapse pass (collapses add no vertex): the speculated verdicts this
+        // edit may have changed (see speculateCollapses). v moved and the rings of v and its
+        // neighbours changed, which the verdicts of every edge with an end within two edges of v read.
+        if (mCollapseMarks.empty()) return;
         mCollapseMarks[std::size_t(v.idx())] = 1;
         for (auto n = mMesh.cvv_begin(v); n.is_valid(); ++n) {
             mCollapseMarks[std::size_t(n->idx())] = 1;
@@ -324,6 +324,7 @@ public:
             if (mMesh.status(e).deleted() || length(e) != item.length) continue; // stale
             collapseShortEdge(e);
         }
+        mCollapseMarks.clear(); // (the verdicts are spent: later edits mark nothing)
         return mCollapses;
     }
 
@@ -739,7 +740,7 @@ private:
     int mCollapses = 0;             ///< collapses of the current collapse stage
     std::vector<VertexHandle> mCap; ///< the vertices of a small cap being dissolved
     // speculateCollapses: by edge idx(), the verdicts and the speculation they belong to; by
-    // vertex idx(), marked by the collapses since.
+    // vertex idx(), marked by the collapses since (empty outside a speculating collapse pass).
     std::vector<std::array<Verdict, 3>> mVerdicts;
     std::vector<std::uint32_t> mSpeculatedAt;
     std::uint32_t mSpeculation = 0;

@@ -325,7 +325,7 @@ public:
             for (std::int64_t x = c[0]; x <= c[3]; ++x)
                 for (std::int64_t y = c[1]; y <= c[4]; ++y)
                     for (std::int64_t z = c[2]; z <= c[5]; ++z) {
-                        e.key = pack(x, y, z);
+                        e.key = packCell(x, y, z); // (cells relative to the origin: 0 <= x, y, z < 2^21; queries clamped)
                         e.lowest = std::uint8_t((x == c[0] ? 1 : 0) | (y == c[1] ? 2 : 0) | (z == c[2] ? 4 : 0));
                         mTemp.push_back(e);
                     }
@@ -358,7 +358,7 @@ public:
             for (const Entry& e : mEntries) {
                 std::array<std::int64_t, 6> b{};
                 cellRange(e.box, b);
-                if (e.item > after && e.key == pack(b[0], b[1], b[2]) && overlaps(q, e.box)) f(int(e.item));
+                if (e.item > after && e.key == packCell(b[0], b[1], b[2]) && overlaps(q, e.box)) f(int(e.item));
             }
             return;
         }
@@ -371,7 +371,7 @@ public:
         const std::uint64_t span = std::uint64_t(c[5] - c[2]);
         for (std::int64_t x = c[0]; x <= c[3]; ++x)
             for (std::int64_t y = c[1]; y <= c[4]; ++y) {
-                const std::uint64_t first = pack(x, y, c[2]);
+                const std::uint64_t first = packCell(x, y, c[2]);
                 const std::size_t b0 = bucketOf(first), b1 = b0 + std::size_t(span);
                 // The column's cells z0..z1 are buckets b0..b1 (mod the bucket count): one run of
                 // entries, or two where it wraps.
@@ -457,9 +457,6 @@ private:
             if (c[std::size_t(k)] > c[std::size_t(k) + 3] || c[std::size_t(k) + 3] - c[std::size_t(k)] > kMaxSpan) return false;
         return true;
     }
-    /// Cell coordinates relative to the origin (0 <= x, y, z < 2^21 for the boxes built; a query's
-    /// are clamped to that range), z in the low bits.
-    static std::uint64_t pack(std::int64_t x, std::int64_t y, std::int64_t z) { return packCell(x, y, z); }
     /// The column's hash plus z: consecutive cells along z are consecutive buckets.
     std::size_t bucketOf(std::uint64_t key) const
     {

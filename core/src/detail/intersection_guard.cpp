@@ -28,10 +28,7 @@ void IntersectionGuard::build()
     mBuilt = true;
     // The boxes in parallel, their extents summed in face order.
     mBoxes.assign(mMesh.n_faces(), Box6{});
-    parallelFor(0, mMesh.n_faces(), 2048, [&](std::size_t i) {
-        const FaceHandle f{int(i)};
-        if (!mMesh.status(f).deleted()) mBoxes[i] = faceBox(f);
-    });
+    forLive<FaceHandle>(mMesh, mMesh.n_faces(), 2048, [&](std::size_t i) { mBoxes[i] = faceBox(FaceHandle(int(i))); });
     double extent = 0;
     std::size_t count = 0;
     for (auto f : mMesh.faces()) {

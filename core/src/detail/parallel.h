@@ -25,4 +25,14 @@ void parallelFor(std::size_t begin, std::size_t end, std::size_t grain, Fn&& fn)
     });
 }
 
+/// fn(i) for every index i in [0, count) whose mesh element Handle(i) is not deleted, in parallel
+/// chunks of `grain` indices: fn may write only what index i owns.
+template <class Handle, class MeshT, class Fn>
+void forLive(const MeshT& mesh, std::size_t count, std::size_t grain, Fn&& fn)
+{
+    parallelFor(0, count, grain, [&](std::size_t i) {
+        if (!mesh.status(Handle(int(i))).deleted()) fn(i);
+    });
+}
+
 } // namespace riemesh::detail
