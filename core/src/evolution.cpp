@@ -50,6 +50,27 @@ std::size_t smallestComponent(const Mesh& mesh)
     return *std::min_element(size.begin(), size.end());
 }
 
+/// Deletes the components of at most kCollapsedComponent vertices that are inside out (see
+/// step()); returns how many went.
+int removeCollapsedComponents(Mesh& mesh)
+{
+    int count = 0;
+    const std::vector<int> label = componentLabels(mesh, &count);
+    std::vector<std::size_t> size(std::size_t(count), 0);
+    for (int l : label)
+        if (l >= 0) ++size[std::size_t(l)];
+    if (std::none_of(size.begin(), size.end(), [](std::size_t n) { return n <= kCollapsedComponent; })) return 0;
+    const std::vector<ComponentShape> shapes = componentShapes(mesh, label, count);
+    std::vector<char> doomed(std::size_t(count), 0);
+    int removed = 0;
+    for (std::size_t i = 0; i < shapes.size(); ++i)
+        if (shapes[i].vertices <= kCollapsedComponent && !shapes[i].outward()) doomed[i] = 1, ++removed;
+    if (!removed) return 0;
+    for (auto f : mesh.faces())
+        if (doomed[std::size_t(label[mesh.fv_begin(f)->idx()])]) mesh.delete_face(f, true);
+    return removed;
+}
+
 /// The box makeInitialBox() meshes: the image's bounds inset by a voxel, moved out by `grow`.
 Box3 initialBoxBounds(const ScalarImage& image, double grow, const char* who)
 {
@@ -284,6 +305,26 @@ IterationStats Evolution::step()
         const double fine = mOptions.delta * mLevels.back().scale;
         removed = removeSmallComponents(mMesh, coarse ? 4 : 6, 0.5 * fine * fine * fine);
     }
+    // A component that has shrunk to a handful of vertices on the finest level around nothing it
+    // can hold on to (the initial box of a noise blob, an object below delta) is turned inside
+    // out by the push and then balloons until it meets the rest: on the thin plate (seed 1,
+    // --smooth 0.7) a blob's box at the image's corner was an inverted tetrahedron by iteration 4,
+    // grew to 6,500 vertices and swallowed the plate, leaving an empty mesh. Delete it, as a cut's
+    // specks are (a handful of vertices still enclosing a small object, outward, stays); a coarse
+    // level starts again without itself instead (updateConvergence()). The component pass runs
+    // only while some component may be that small: every iteration while the mesh has several
+    // components, and for a lone one once it has a handful of vertices left.
+    if (mLevel + 1 == int(mLevels.size()) && !removed) {
+        if (mComponents < 0) componentLabels(mMesh, &mComponents);
+        bool small = mComponents > 1;
+        if (mComponents == 1) {
+            std::size_t n = 0;
+            for (auto v : mMesh.vertices()) { (void)v; if (++n > kCollapsedComponent) break; }
+            small = n <= kCollapsedComponent;
+        }
+        if (small) removed = removeCollapsedComponents(mMesh);
+    }
+    if (ts.merges || ts.cuts || removed) mComponents = -1;
 
     // Compaction is O(n) and costly in OpenMesh: deleted elements are skipped by every iterator, so
     // compact only once they pile up (or after a topology edit, which deletes whole one-rings).
@@ -338,6 +379,7 @@ void Evolution::updateConvergence()
     if (total >= o.maxIterations) { mReason = StopReason::IterationCap; return; }
     const bool coarse = mLevel + 1 < int(mLevels.size());
     const int inLevel = total - mLevelStart;
+    if (!coarse && total > 0 && mHistory[total - 1].vertices == 0) { mReason = StopReason::Converged; return; } // nothing left
     if (!coarse) {
         const int w = mLevels.size() > 1 ? o.scheduledConvergenceWindow : o.convergenceWindow;
         if (inLevel >= std::max(mLevels.size() > 1 ? 0 : o.minIterations, 2 * w) && settled(o, w)) mReason = StopReason::Converged;
@@ -355,6 +397,7 @@ void Evolution::updateConvergence()
         mLevelStart = total;
         mLastTopologyEvent = total;
         mLastCut = mLastMerge = 0;
+        mComponents = -1;
         mChurn = mMesh.n_vertices();
         ++mRestarts;
         return;

@@ -138,6 +138,38 @@ TEST_CASE("evolution: makeInitialBoxes starts a box per part, merges parts that 
     }
 }
 
+TEST_CASE("evolution: a part's box that shrinks to a handful of vertices is deleted, not left to turn inside out")
+{
+    // A noise blob, or an object smaller than a few edges, gets its own initial box (vdb2mesh finds
+    // the parts on a coarse image); on the finest level nothing can hold that box up. Seen on the
+    // thin plate (seed 1, --smooth 0.7): a blob's box shrank to a tetrahedron, turned inside out,
+    // ballooned to 6,500 vertices and swallowed the plate, leaving an empty mesh.
+    const auto image = fogImage(
+        [](const Vec3& x) { return std::max(ballSdf(x, Vec3(-14, 0, 0), 6), ballSdf(x, Vec3(14, 0, 0), 0.7)); },
+        Box3(Vec3(-24, -10, -10), Vec3(24, 10, 10)));
+    const Box3 ball(Vec3(-21, -7, -7), Vec3(-7, 7, 7)), speck(Vec3(11, -3, -3), Vec3(17, 3, 3));
+    Mesh mesh = makeInitialBoxes(image, {ball, speck}, 2.0, 1.0);
+    REQUIRE(topologyOf(mesh).components == 2);
+    EuclideanMetric metric;
+    const auto stats = runChecked(mesh, image, metric, baseOptions(2.0), 5);
+    CHECK(std::string(toString(stats.reason)) == "converged");
+    int removed = 0;
+    for (const auto& it : stats.iterations) removed += it.removedComponents;
+    const auto t = topologyOf(mesh);
+    INFO("iterations " << stats.iterations.size() << ", components removed " << removed << ", vertices " << mesh.n_vertices());
+    CHECK(t.components == 1);
+    CHECK(t.genus == 0);
+    CHECK(removed == 1);
+    double sum = 0, far = 0;
+    for (auto v : mesh.vertices()) {
+        const Vec3 p = position(mesh, v);
+        sum += std::abs((p - Vec3(-14, 0, 0)).norm() - 6);
+        far = std::max(far, (p - Vec3(-14, 0, 0)).norm());
+    }
+    CHECK(far < 7.5); // the ball, and nothing else
+    CHECK(sum / double(mesh.n_vertices()) < 0.2);
+}
+
 TEST_CASE("evolution: a box deflating onto a torus ends with genus 1")
 {
     const auto image = fogImage([](const Vec3& x) { return torusSdf(x, 8, 3); },

@@ -237,6 +237,8 @@ TEST_CASE("vdb2mesh: every bad input exits 1 with one line naming the problem an
         {good + " " + out + " --stats " + f.path("no/such/folder/s.json"), "does not exist"},
         // Stops after the first iteration: the box is already past the cap (a limit, exit 1).
         {good + " " + out + " --max-vertices 50", "vertex cap of 50 vertices"},
+        // Edges longer than the ball (radius 7.2): the box shrinks to an inverted tetrahedron.
+        {good + " " + out + " --delta 20 --levels 0", "no surface left after"},
     };
     MESSAGE(std::size(cases) << " bad-input cases");
     for (const auto& c : cases) {

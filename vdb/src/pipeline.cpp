@@ -323,6 +323,15 @@ PipelineResult meshVolume(Volume& volume, const PipelineOptions& options)
                                  " iterations; no output written (raise --delta or the cap)");
     }
 
+    if (r.mesh.faces().begin() == r.mesh.faces().end()) {
+        // Every part shrank away (an object a few edges across at this delta collapses and is
+        // deleted as a speck): an empty mesh is no extraction of a surface the image has.
+        std::ostringstream msg;
+        msg << "no surface left after " << r.evolution.iterations.size()
+            << " iterations: every part of the model shrank below a few edges of delta " << shown(options.delta)
+            << " voxels and was removed; no output written (lower --delta or --smooth)";
+        throw PipelineInputError(msg.str());
+    }
     if (options.sharpen) {
         // Kept only if it adds no crossing: the moves are small (a few voxels at most), but nothing
         // checks them against the surface's other sheets.

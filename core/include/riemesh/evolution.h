@@ -161,6 +161,7 @@ private:
     int mLastTopologyEvent = 0;
     int mLastCut = 0;   ///< iteration of the last tunnel cut (0: none)
     int mLastMerge = 0; ///< iteration of the last merge (0: none)
+    int mComponents = -1; ///< connected components of the mesh on the finest level (-1: to count)
     std::size_t mChurn = 0; ///< splits and collapses since the mesh was last renumbered
     void updateConvergence();
     EvolutionOptions levelOptions() const; ///< mOptions with the current level's scale
