@@ -260,13 +260,18 @@ bool pinCallingThread(int cpu)
 /// the faster one: the speed-up is measured against the best single core. Figures are medians of
 /// the timed steps, phases their means.
 /// "cores" is the processor time the 2-thread steps used per second: on a busy machine it stays
-/// near 1, and the speed-up then says little about the code.
+/// near 1, and the speed-up then says little about the code. "ceiling" is the most two threads
+/// could give on these two processors at their own 1-thread speeds (1T cpu0, 1T cpu1), perfectly
+/// balanced: 1 + fast / slow; one processor 1.55x slower than the other (seen on 2026-11-27:
+/// the phantom 200^3 on one thread, 1.03-1.08 s pinned to processor 0, 1.56-1.68 s on 1) caps
+/// the speed-up at 1.65x.
 void parallelScaling(bool quick)
 {
     std::printf("\n# evolve step on 1 and 2 threads (ball image, converged sphere; %s)\n",
                 isParallel() ? "TBB" : "built without TBB: both serial");
-    std::printf("%8s %-11s %9s %9s %9s %8s %6s   %-34s %-34s\n", "target", "metric", "vertices", "ms 1T", "ms 2T", "speedup", "cores",
-                "1T: forces integr regul collis topol", "2T: forces integr regul collis topol");
+    std::printf("%8s %-11s %9s %9s %9s %8s %6s   %-34s %-34s %9s %9s %8s\n", "target", "metric", "vertices", "ms 1T", "ms 2T", "speedup", "cores",
+                "1T: forces integr regul collis topol", "2T: forces integr regul collis topol", "1T cpu0", "1T cpu1",
+                "ceiling");
     const auto ball = [](const Vec3& x) { return ballSdf(x, Vec3::Zero(), 30); };
     ContourMetric contour = contourMetric(ball, Box3(Vec3::Constant(-40), Vec3::Constant(40)), 4.0);
     EuclideanMetric euclidean;
@@ -302,8 +307,11 @@ void parallelScaling(bool quick)
                 std::nth_element(v.begin(), v.begin() + long(v.size() / 2), v.end());
                 return v[v.size() / 2];
             };
-            double m1 = median(onCpu[0]);
-            if (!onCpu[1].empty()) m1 = std::min(m1, median(onCpu[1]));
+            const double m1cpu0 = median(onCpu[0]), m1cpu1 = onCpu[1].empty() ? 0.0 : median(onCpu[1]);
+            const double m1 = onCpu[1].empty() ? m1cpu0 : std::min(m1cpu0, m1cpu1);
+            // What two threads could give at best on these two processors, each at its own
+            // 1-thread speed, perfectly balanced: 1 + fast/slow (2 on equal processors).
+            const double ceiling = onCpu[1].empty() ? 0.0 : 1.0 + m1 / std::max(m1cpu0, m1cpu1);
             const double m2 = median(ms[1]), speedup = m1 / m2;
             char phases[2][64];
             for (int t = 0; t < 2; ++t) {
@@ -311,9 +319,9 @@ void parallelScaling(bool quick)
                 std::snprintf(phases[t], sizeof phases[t], "%6.2f %6.2f %6.2f %6.2f %6.2f", sum[t].forces / n,
                               sum[t].integration / n, sum[t].regularity / n, sum[t].collisions / n, sum[t].topology / n);
             }
-            std::printf("%8d %-11s %9zu %9.2f %9.2f %7.2fx %6.2f   %-34s %-34s\n", c.target,
+            std::printf("%8d %-11s %9zu %9.2f %9.2f %7.2fx %6.2f   %-34s %-34s %9.2f %9.2f %7.2fx\n", c.target,
                         riemannian ? "riemannian" : "euclidean", c.mesh->n_vertices(), m1, m2, speedup,
-                        wall2 > 0 ? cpu2 / wall2 : 0.0, phases[0], phases[1]);
+                        wall2 > 0 ? cpu2 / wall2 : 0.0, phases[0], phases[1], m1cpu0, m1cpu1, ceiling);
             std::fflush(stdout);
         }
     }
