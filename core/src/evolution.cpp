@@ -9,6 +9,7 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <cstdint>
 #include <stdexcept>
 
 namespace riemesh {
@@ -37,6 +38,19 @@ constexpr std::size_t kCollapsedComponent = 6;
 /// Edits of the intersection-free evolution keep this fraction of its minimal separation between
 /// their new faces and the rest (see step()).
 constexpr double kEditSeparation = 1e-3;
+
+/// Per-vertex memory of the topology changes around it (kTopologyHoldProperty): for how many more
+/// iterations a merge is refused there after a cut, and how many changes (merges and cuts) have
+/// touched it. See Evolution::holdTopology().
+struct TopologyHold {
+    std::uint16_t afterCut = 0;
+    std::uint8_t changes = 0;
+};
+constexpr const char* kTopologyHoldProperty = "riemesh:topology_hold";
+/// The first hold lasts kHoldIterations; each earlier change at a vertex doubles it, up to
+/// 2^kMaxHoldDoublings times (10 x 256 = 2,560 iterations: the rest of any run).
+constexpr int kHoldIterations = 10;
+constexpr int kMaxHoldDoublings = 8;
 
 /// The number of vertices of the smallest connected component (0 for an empty mesh).
 std::size_t smallestComponent(const Mesh& mesh)
@@ -170,6 +184,11 @@ Evolution::Evolution(Mesh& mesh, std::vector<EvolutionLevel> levels, const Metri
     mChurn = mMesh.n_vertices(); // a given mesh's numbering is unknown: renumbered at the first step
     OpenMesh::VPropHandleT<char> mergeZone; // zones left by an earlier run count down from the start
     if (mMesh.get_property_handle(mergeZone, kMergedProperty)) mLastMerge = 1;
+    OpenMesh::VPropHandleT<int> cutId; // cut ids left by an earlier run are not fresh
+    if (mMesh.get_property_handle(cutId, kCutIdProperty))
+        for (auto v : mMesh.vertices()) mCutIdSeen = std::max(mCutIdSeen, mMesh.property(cutId, v));
+    OpenMesh::VPropHandleT<TopologyHold> holds; // and holds count down from the start
+    if (mMesh.get_property_handle(holds, kTopologyHoldProperty)) mHoldUntil = kHoldIterations << kMaxHoldDoublings;
 }
 
 void Evolution::setOptions(const EvolutionOptions& options)
@@ -261,6 +280,7 @@ IterationStats Evolution::step()
     keepSettledPairsApart(mMesh, image, o.forces, collisions, contacts);
     phase(it.phases.collisions);
     TopologyStats ts;
+    holdTopology(collisions, contacts);
     if (!collisions.empty() || !rs.tunnels.empty()) {
         TopologyOptions to;
         to.neighbourhoodRadius = co.neighbourhoodFactor * collisionRadius(mMetric, co);
@@ -284,6 +304,7 @@ IterationStats Evolution::step()
             }
     }
     const int iteration = int(mHistory.size()) + 1;
+    if (ts.merges || ts.cuts) recordTopologyChanges(iteration);
     if (ts.cuts) mLastCut = iteration;
     if (ts.merges) mLastMerge = iteration;
     // Fresh-merge zones last kMergeZoneIterations: count them down (an O(n) pass, only while one may
@@ -293,6 +314,11 @@ IterationStats Evolution::step()
         mMesh.get_property_handle(mergeZone, kMergedProperty))
         for (auto v : mMesh.vertices())
             if (char& left = mMesh.property(mergeZone, v); left > 0) --left;
+    OpenMesh::VPropHandleT<TopologyHold> holds;
+    if (iteration <= mHoldUntil && mMesh.get_property_handle(holds, kTopologyHoldProperty))
+        for (auto v : mMesh.vertices()) {
+            if (std::uint16_t& left = mMesh.property(holds, v).afterCut; left > 0) --left;
+        }
     // Specks cut off from the surface have nothing to hold on to and shrink into degenerate faces:
     // remove components smaller than a few delta-sized triangles. Specks come only from cuts, so the
     // O(n) component pass runs only for a while after one.
@@ -370,6 +396,50 @@ IterationStats Evolution::step()
     return it;
 }
 
+void Evolution::holdTopology(std::vector<CollisionPair>& collisions, std::vector<CollisionPair>& contacts) const
+{
+    OpenMesh::VPropHandleT<TopologyHold> holds;
+    if (int(mHistory.size()) + 1 > mHoldUntil || !mMesh.get_property_handle(holds, kTopologyHoldProperty)) return;
+    auto hold = [&](VertexHandle v) -> const TopologyHold& { return mMesh.property(holds, v); };
+    std::size_t kept = 0;
+    for (const CollisionPair& c : collisions) {
+        if (hold(c.u).afterCut || hold(c.w).afterCut)
+            contacts.push_back(c); // held apart instead of merged
+        else
+            collisions[kept++] = c;
+    }
+    collisions.resize(kept);
+}
+
+void Evolution::recordTopologyChanges(int iteration)
+{
+    // The zones the edits just tagged: a merge's band and two rings (kMergedProperty at its full
+    // count), a cut's caps and two rings (a cut id above every earlier one).
+    OpenMesh::VPropHandleT<char> merged;
+    OpenMesh::VPropHandleT<int> cutId;
+    const bool hasMerged = mMesh.get_property_handle(merged, kMergedProperty);
+    const bool hasCut = mMesh.get_property_handle(cutId, kCutIdProperty);
+    OpenMesh::VPropHandleT<TopologyHold> holds;
+    if (!mMesh.get_property_handle(holds, kTopologyHoldProperty)) {
+        mMesh.add_property(holds, kTopologyHoldProperty);
+        for (auto v : mMesh.all_vertices()) mMesh.property(holds, v) = TopologyHold{};
+    }
+    int newest = mCutIdSeen;
+    for (auto v : mMesh.vertices()) {
+        const bool mergedHere = hasMerged && mMesh.property(merged, v) == char(kMergeZoneIterations);
+        const int id = hasCut ? mMesh.property(cutId, v) : 0;
+        const bool cutHere = id > mCutIdSeen;
+        newest = std::max(newest, id);
+        if (!mergedHere && !cutHere) continue;
+        TopologyHold& h = mMesh.property(holds, v);
+        const int length = kHoldIterations << std::min<int>(h.changes, kMaxHoldDoublings);
+        if (h.changes < 255) ++h.changes;
+        if (cutHere) h.afterCut = std::uint16_t(std::max<int>(h.afterCut, length));
+        mHoldUntil = std::max(mHoldUntil, iteration + length);
+    }
+    mCutIdSeen = newest;
+}
+
 void Evolution::updateConvergence()
 {
     const EvolutionOptions o = levelOptions();
@@ -398,6 +468,7 @@ void Evolution::updateConvergence()
         mLastTopologyEvent = total;
         mLastCut = mLastMerge = 0;
         mComponents = -1;
+        mCutIdSeen = mHoldUntil = 0;
         mChurn = mMesh.n_vertices();
         ++mRestarts;
         return;

@@ -10,6 +10,7 @@
 #include "riemesh/image.h"
 #include "riemesh/integration.h"
 #include "riemesh/metric.h"
+#include "riemesh/topology.h"
 
 #include <cstddef>
 #include <functional>
@@ -162,6 +163,17 @@ private:
     int mLastCut = 0;   ///< iteration of the last tunnel cut (0: none)
     int mLastMerge = 0; ///< iteration of the last merge (0: none)
     int mComponents = -1; ///< connected components of the mesh on the finest level (-1: to count)
+    int mCutIdSeen = 0;  ///< the largest cut id (kCutIdProperty) seen after the last cuts
+    int mHoldUntil = 0;  ///< last iteration a topology hold may still be active
+    /// Topology hysteresis: a collision pair next to a fresh tunnel cut becomes a contact (held
+    /// apart) instead of a merge, for 10 iterations doubled by every change the vertex has already
+    /// seen (recordTopologyChanges). The head MRI at iso 80 with the guarantee merged and cut in
+    /// turn at the same places every iteration (2,280 merges, 2,205 cuts, 3,000-iteration cap); it
+    /// now converges in 1,312 iterations (433 merges, 388 cuts on its finest level). Skipping tunnel
+    /// cuts next to a fresh merge as well cut the events further but lost the torus (the uncut band
+    /// turned inside out).
+    void holdTopology(std::vector<CollisionPair>& collisions, std::vector<CollisionPair>& contacts) const;
+    void recordTopologyChanges(int iteration);
     std::size_t mChurn = 0; ///< splits and collapses since the mesh was last renumbered
     void updateConvergence();
     EvolutionOptions levelOptions() const; ///< mOptions with the current level's scale
