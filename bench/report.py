@@ -16,9 +16,9 @@ Standard library only (Debian's /usr/bin/python3); plots need gnuplot (Debian gn
 import argparse
 import datetime
 import json
-import re
 import math
 import os
+import re
 import shutil
 import subprocess
 import sys

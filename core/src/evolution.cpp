@@ -434,7 +434,8 @@ void Evolution::recordTopologyChanges(int iteration)
         TopologyHold& h = mMesh.property(holds, v);
         const int length = kHoldIterations << std::min<int>(h.changes, kMaxHoldDoublings);
         if (h.changes < 255) ++h.changes;
-        if (cutHere) h.afterCut = std::uint16_t(std::max<int>(h.afterCut, length));
+        if (!cutHere) continue; // a merge only counts as a change
+        h.afterCut = std::uint16_t(std::max<int>(h.afterCut, length));
         mHoldUntil = std::max(mHoldUntil, iteration + length);
     }
     mCutIdSeen = newest;
