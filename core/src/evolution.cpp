@@ -4,6 +4,7 @@
 #include "riemesh/collision.h"
 #include "riemesh/primitives.h"
 #include "riemesh/regularity.h"
+#include "riemesh/self_intersection.h"
 #include "riemesh/topology.h"
 
 #include <algorithm>
@@ -160,6 +161,7 @@ void validate(const EvolutionOptions& o)
     if (!(o.vmaxFraction > 0 && o.vmaxFraction <= 1)) throw std::invalid_argument("evolution: vmaxFraction must be in (0, 1]");
     if (!(o.mass > 0) || !(o.damping >= 0)) throw std::invalid_argument("evolution: mass must be > 0 and damping >= 0");
     if (o.maxIterations < 0 || o.convergenceWindow < 1) throw std::invalid_argument("evolution: bad iteration limits");
+    if (o.tangleCheckFirst < 1) throw std::invalid_argument("evolution: tangleCheckFirst must be >= 1");
 }
 
 } // namespace
@@ -181,6 +183,7 @@ Evolution::Evolution(Mesh& mesh, std::vector<EvolutionLevel> levels, const Metri
         throw std::invalid_argument("evolution: bad coarse-level limits");
     prepareMesh(mMesh);
     if (mLevels.size() > 1) mInitialMesh = mMesh;
+    if (untangling()) mUntangleMesh = mMesh;
     mChurn = mMesh.n_vertices(); // a given mesh's numbering is unknown: renumbered at the first step
     OpenMesh::VPropHandleT<char> mergeZone; // zones left by an earlier run count down from the start
     if (mMesh.get_property_handle(mergeZone, kMergedProperty)) mLastMerge = 1;
@@ -329,7 +332,9 @@ IterationStats Evolution::step()
         // the finer levels refine. Specks are judged by the finest level's delta.
         const bool coarse = mLevel + 1 < int(mLevels.size());
         const double fine = mOptions.delta * mLevels.back().scale;
-        removed = removeSmallComponents(mMesh, coarse ? 4 : 6, 0.5 * fine * fine * fine);
+        std::size_t inverted = 0;
+        removed = removeSmallComponents(mMesh, coarse ? 4 : 6, 0.5 * fine * fine * fine, &inverted);
+        mInvertedPart = mInvertedPart || inverted > kCollapsedComponent; // a tangle's (see checkTangle)
     }
     // A component that has shrunk to a handful of vertices on the finest level around nothing it
     // can hold on to (the initial box of a noise blob, an object below delta) is turned inside
@@ -392,6 +397,7 @@ IterationStats Evolution::step()
     if (ts.merges || ts.cuts) mLastTopologyEvent = it.iteration;
 
     updateConvergence();
+    checkTangle();
     if (o.progress && !o.progress(it) && mReason == StopReason::Running) mReason = StopReason::Interrupted;
     return it;
 }
@@ -447,7 +453,7 @@ void Evolution::updateConvergence()
     const int total = int(mHistory.size());
     // The live count (n_vertices() also counts deleted vertices not yet compacted away).
     if (total > 0 && mHistory[total - 1].vertices > o.maxVertices) { mReason = StopReason::VertexCap; return; }
-    if (total >= o.maxIterations) { mReason = StopReason::IterationCap; return; }
+    if (total - mAttemptStart >= o.maxIterations) { mReason = StopReason::IterationCap; return; }
     const bool coarse = mLevel + 1 < int(mLevels.size());
     const int inLevel = total - mLevelStart;
     if (!coarse && total > 0 && mHistory[total - 1].vertices == 0) { mReason = StopReason::Converged; return; } // nothing left
@@ -492,6 +498,47 @@ void Evolution::updateConvergence()
         mSafeStepCache.invalidate(); // (a new delta: new clearances)
         mLevelStart = total;
     }
+}
+
+void Evolution::checkTangle()
+{
+    if (!untangling()) return;
+    const int total = int(mHistory.size());
+    const bool ended = mReason == StopReason::Converged || mReason == StopReason::IterationCap;
+    if (mReason != StopReason::Running && !ended) return;
+    if (mTangleLevelStart != mLevelStart) { // a new level (or a restart): checks from its start again
+        mTangleLevelStart = mLevelStart;
+        mNextTangleCheck = mOptions.tangleCheckFirst;
+    }
+    const int inLevel = total - mLevelStart;
+    if (!ended && !mInvertedPart && inLevel < mNextTangleCheck) return;
+    if (!ended && inLevel >= mNextTangleCheck) mNextTangleCheck *= 2;
+    const std::size_t crossings = findSelfIntersections(mMesh).count();
+    std::size_t faces = 0;
+    for (auto f : mMesh.faces()) { (void)f; ++faces; }
+    const std::size_t limit = ended ? 1 : std::max(mOptions.tangleCrossings, faces / 200);
+    // A part of the surface deleted for being inside out (more than a collapsed speck) is a tangle
+    // too, whatever is left: the default mode's torus in stress case 8797090675329720181 vanished so.
+    if (crossings < limit && !mInvertedPart) return;
+    // Tangled: start again from the initial surface, every level, with the guarantee.
+    mMesh = mUntangleMesh;
+    mUntangleMesh = Mesh();
+    if (mLevels.size() > 1) mInitialMesh = mMesh;
+    mOptions.intersectionFree = true;
+    mUntangledAt = total;
+    mTangleCrossings = crossings;
+    mTangleInverted = mInvertedPart;
+    mReason = StopReason::Running;
+    mAttemptStart = total;
+    mLevel = 0;
+    mLevelStart = total;
+    mLastTopologyEvent = total;
+    mLastCut = mLastMerge = 0;
+    mComponents = -1;
+    mCutIdSeen = mHoldUntil = 0;
+    mChurn = mMesh.n_vertices();
+    mPredictedVertices = 0;
+    mSafeStepCache.invalidate();
 }
 
 bool Evolution::settled(const EvolutionOptions& o, int w) const
@@ -539,6 +586,9 @@ EvolutionStats evolve(Mesh& mesh, const std::vector<EvolutionLevel>& levels, con
     stats.reason = evolution.reason();
     stats.predictedVertices = evolution.predictedVertices();
     stats.restarts = evolution.restarts();
+    stats.untangledAt = evolution.untangledAt();
+    stats.tangleCrossings = evolution.tangleCrossings();
+    stats.tangleInverted = evolution.tangleInverted();
     for (const auto& it : stats.iterations) {
         stats.splits += it.splits;
         stats.collapses += it.collapses;

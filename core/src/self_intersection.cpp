@@ -2,6 +2,7 @@
 // detail/triangle_intersection.h on the pairs whose boxes overlap.
 #include "riemesh/self_intersection.h"
 
+#include "detail/parallel.h"
 #include "detail/triangle_intersection.h"
 
 #include <algorithm>
@@ -138,30 +139,37 @@ SelfIntersectionStats findSelfIntersections(const Mesh& mesh, const SelfIntersec
     const Bvh bvh = buildBvh(faces, options.leafSize);
     if (bvh.nodes.empty()) return stats;
 
-    auto test = [&](int i, int j) {
-        if (!boxesOverlap(faces.box[i], faces.box[j])) return;
-        ++stats.testedPairs;
-        const TriangleContact kind =
-            detail::classifyTriangles(faces.vertex[i], faces.triangle[i], faces.vertex[j], faces.triangle[j]);
-        if (kind == TriangleContact::None) return;
-        if (kind == TriangleContact::Crossing) ++stats.crossings;
-        else if (kind == TriangleContact::VertexFold) ++stats.vertexFolds;
-        else ++stats.edgeFolds;
-        if (options.collectPairs && stats.pairs.size() < options.maxPairs) {
-            const FaceHandle a = faces.handle[i], b = faces.handle[j];
-            stats.pairs.emplace_back(a.idx() < b.idx() ? a : b, a.idx() < b.idx() ? b : a);
-        }
-    };
     // Self-traversal: a node against itself descends into (L, L), (R, R) and (L, R); two distinct
-    // nodes are compared only when their boxes overlap, descending into the inner one.
-    std::vector<std::pair<int, int>> stack = {{0, 0}};
-    while (!stack.empty()) {
-        const auto [x, y] = stack.back();
-        stack.pop_back();
+    // nodes are compared only when their boxes overlap, descending into the inner one. The first
+    // levels are expanded here into a list of node pairs (tasks), whose traversals then run in
+    // parallel, each into its own counts; tasks are summed in order and the pairs sorted, so the
+    // result is the same for any thread count.
+    struct Task {
+        SelfIntersectionStats stats;
+        std::vector<std::pair<int, int>> stack;
+    };
+    auto expand = [&](std::pair<int, int> xy, SelfIntersectionStats& out, std::vector<std::pair<int, int>>& stack,
+                      bool descend) {
+        auto test = [&](int i, int j) {
+            if (!boxesOverlap(faces.box[i], faces.box[j])) return;
+            ++out.testedPairs;
+            const TriangleContact kind =
+                detail::classifyTriangles(faces.vertex[i], faces.triangle[i], faces.vertex[j], faces.triangle[j]);
+            if (kind == TriangleContact::None) return;
+            if (kind == TriangleContact::Crossing) ++out.crossings;
+            else if (kind == TriangleContact::VertexFold) ++out.vertexFolds;
+            else ++out.edgeFolds;
+            if (options.collectPairs && out.pairs.size() < options.maxPairs) {
+                const FaceHandle a = faces.handle[i], b = faces.handle[j];
+                out.pairs.emplace_back(a.idx() < b.idx() ? a : b, a.idx() < b.idx() ? b : a);
+            }
+        };
+        const auto [x, y] = xy;
         const Bvh::Node& nx = bvh.nodes[x];
         const Bvh::Node& ny = bvh.nodes[y];
         if (x == y) {
             if (nx.count > 0) {
+                if (!descend) return false;
                 for (int i = nx.first; i < nx.first + nx.count; ++i)
                     for (int j = i + 1; j < nx.first + nx.count; ++j) test(bvh.order[i], bvh.order[j]);
             } else {
@@ -169,10 +177,11 @@ SelfIntersectionStats findSelfIntersections(const Mesh& mesh, const SelfIntersec
                 stack.push_back({nx.first + 1, nx.first + 1});
                 stack.push_back({nx.first, nx.first + 1});
             }
-            continue;
+            return true;
         }
-        if (!boxesOverlap(nx.box, ny.box)) continue;
+        if (!boxesOverlap(nx.box, ny.box)) return true;
         if (nx.count > 0 && ny.count > 0) {
+            if (!descend) return false;
             for (int i = nx.first; i < nx.first + nx.count; ++i)
                 for (int j = ny.first; j < ny.first + ny.count; ++j) test(bvh.order[i], bvh.order[j]);
         } else if (ny.count > 0 || (nx.count == 0 && extent(nx.box) >= extent(ny.box))) {
@@ -183,6 +192,40 @@ SelfIntersectionStats findSelfIntersections(const Mesh& mesh, const SelfIntersec
             stack.push_back({x, ny.first});
             stack.push_back({x, ny.first + 1});
         }
+        return true;
+    };
+    // Breadth first until there are enough tasks (leaf work is left to the tasks).
+    constexpr std::size_t kTasks = 256;
+    std::vector<std::pair<int, int>> frontier = {{0, 0}}, next, leaves;
+    while (!frontier.empty() && frontier.size() + leaves.size() < kTasks) {
+        next.clear();
+        for (const auto& xy : frontier)
+            if (!expand(xy, stats, next, false)) leaves.push_back(xy);
+        frontier.swap(next);
+    }
+    frontier.insert(frontier.end(), leaves.begin(), leaves.end());
+    std::vector<Task> tasks(frontier.size());
+    detail::parallelFor(0, frontier.size(), 1, [&](std::size_t k) {
+        Task& t = tasks[k];
+        t.stack.push_back(frontier[k]);
+        while (!t.stack.empty()) {
+            const auto xy = t.stack.back();
+            t.stack.pop_back();
+            expand(xy, t.stats, t.stack, true);
+        }
+    });
+    for (Task& t : tasks) {
+        stats.testedPairs += t.stats.testedPairs;
+        stats.crossings += t.stats.crossings;
+        stats.vertexFolds += t.stats.vertexFolds;
+        stats.edgeFolds += t.stats.edgeFolds;
+        if (options.collectPairs) stats.pairs.insert(stats.pairs.end(), t.stats.pairs.begin(), t.stats.pairs.end());
+    }
+    if (options.collectPairs) {
+        std::sort(stats.pairs.begin(), stats.pairs.end(), [](const auto& a, const auto& b) {
+            return a.first.idx() != b.first.idx() ? a.first.idx() < b.first.idx() : a.second.idx() < b.second.idx();
+        });
+        if (stats.pairs.size() > options.maxPairs) stats.pairs.resize(options.maxPairs);
     }
     return stats;
 }

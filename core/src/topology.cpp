@@ -572,8 +572,9 @@ TopologyStats resolveTopology(Mesh& mesh, const std::vector<CollisionPair>& coll
     return stats;
 }
 
-int removeSmallComponents(Mesh& mesh, std::size_t minVertices, double minVolume)
+int removeSmallComponents(Mesh& mesh, std::size_t minVertices, double minVolume, std::size_t* largestInverted)
 {
+    if (largestInverted) *largestInverted = 0;
     int count = 0;
     const std::vector<int> label = componentLabels(mesh, &count);
     if (count <= 1 && minVertices <= 4 && minVolume <= 0) return 0;
@@ -582,9 +583,11 @@ int removeSmallComponents(Mesh& mesh, std::size_t minVertices, double minVolume)
     int removed = 0;
     for (std::size_t i = 0; i < shapes.size(); ++i) {
         const ComponentShape& c = shapes[i];
-        if (c.vertices < minVertices || std::abs(c.volume) < minVolume || !c.outward()) {
+        const bool small = c.vertices < minVertices || std::abs(c.volume) < minVolume;
+        if (small || !c.outward()) {
             doomed[i] = 1;
             ++removed;
+            if (!small && largestInverted) *largestInverted = std::max(*largestInverted, c.vertices);
         }
     }
     if (!removed) return 0;

@@ -280,6 +280,12 @@ int main(int argc, char** argv)
                             ref->meanSurfaceToMesh / ref->voxelSize, ref->maxSurfaceToMesh / ref->voxelSize,
                             ref->hausdorff / ref->voxelSize);
             std::printf("\n");
+            if (evo.untangledAt > 0)
+                std::printf("note: after iteration %d the surface %s; it was evolved again from the start with "
+                            "--intersection-free, which keeps it embedded (give --intersection-free to start that way)\n",
+                            evo.untangledAt,
+                            evo.tangleInverted ? "had a part turned inside out"
+                                               : ("crossed itself (" + std::to_string(evo.tangleCrossings) + " crossing face pairs)").c_str());
         }
         return 0;
     } catch (const std::exception& e) {

@@ -436,6 +436,10 @@ std::string pipelineStatsJson(const PipelineResult& r, const PipelineRecord& rec
                     {"self_intersections", r.selfIntersections},
                     {"iterations", e.iterations.size()},
                     {"stop", toString(r.stop)},
+                    // A tangled surface evolved again from the start with the guarantee (0: none).
+                    {"untangled_at_iteration", e.untangledAt},
+                    {"tangle_crossings", e.tangleCrossings},
+                    {"tangle_inverted", e.tangleInverted},
                     {"seconds", record.totalSeconds},
                     {"read_seconds", record.readSeconds + r.seconds.downsample},
                     {"metric_seconds", r.seconds.metric},

@@ -88,6 +88,19 @@ struct EvolutionOptions {
     /// cost comes down: it makes the phantom's and the head's evolution 1.9-2.0x slower (issue 17; bench d3e260f).
     bool intersectionFree = false;
     double minSeparation = 1e-3; ///< eta, a fraction of delta
+    /// Without intersectionFree the surface may cross itself: the collision search only sees two
+    /// sheets that are far apart along the mesh, so two walls of a fold (the sides of a gyrus thinner
+    /// than the image resolves) can pass through each other unmerged, and the crossing grows (the
+    /// head MRI at iso 80: hundreds of crossing face pairs within 20 iterations of the finest
+    /// level, then a balloon of 27,000 vertices that ends inside out after 4 minutes). So the
+    /// surface is checked (findSelfIntersections) tangleCheckFirst iterations into each level, then
+    /// at 2x, 4x ... that, and when the evolution ends (converged or capped). A surface with any
+    /// crossing at its end, or at least max(tangleCrossings, 0.5% of its faces) at a check, or
+    /// that lost a part of more than a handful of vertices for being inside out, is tangled: the evolution starts again from the initial surface with intersectionFree on, which
+    /// keeps it embedded (untangledAt()). Off: untangle = false (a tangled result is then returned).
+    bool untangle = true;
+    int tangleCheckFirst = 32;
+    std::size_t tangleCrossings = 64;
     /// Called after every iteration; return false to interrupt.
     std::function<bool(const IterationStats&)> progress;
 };
@@ -97,6 +110,9 @@ struct EvolutionStats {
     StopReason reason = StopReason::Running;
     std::size_t predictedVertices = 0; ///< Evolution::predictedVertices() at the end
     int restarts = 0;                  ///< Evolution::restarts()
+    int untangledAt = 0;               ///< Evolution::untangledAt()
+    std::size_t tangleCrossings = 0;   ///< Evolution::tangleCrossings()
+    bool tangleInverted = false;       ///< Evolution::tangleInverted()
     double seconds = 0;
     int splits = 0, collapses = 0, flips = 0, merges = 0, cuts = 0;
 };
@@ -134,6 +150,13 @@ public:
     /// Times a coarse level gave up on an object too small for it (see step()): the schedule then
     /// started again from the initial surface without that level and the coarser ones.
     int restarts() const { return mRestarts; }
+    /// The iteration after which a tangled surface (see EvolutionOptions::untangle) was replaced by
+    /// the initial one and the evolution started again with intersectionFree on; 0 if it was not.
+    /// tangleCrossings(): the offending face pairs it had then (findSelfIntersections().count()).
+    /// tangleInverted(): a part of more than a handful of vertices had turned inside out.
+    int untangledAt() const { return mUntangledAt; }
+    std::size_t tangleCrossings() const { return mTangleCrossings; }
+    bool tangleInverted() const { return mTangleInverted; }
     const std::vector<IterationStats>& history() const { return mHistory; }
     const EvolutionOptions& options() const { return mOptions; }
     /// The level being evolved, counted from the finest (0) up; levels() in all.
@@ -152,6 +175,16 @@ private:
     std::size_t mPredictedVertices = 0;
     int mRestarts = 0;
     Mesh mInitialMesh; ///< kept while coarse levels remain, for a restart
+    Mesh mUntangleMesh; ///< the initial surface, kept while a tangle may still restart from it
+    int mAttemptStart = 0;   ///< iterations before the current attempt (0, or untangledAt())
+    int mNextTangleCheck = 0; ///< iterations into the level of the next tangle check
+    int mTangleLevelStart = -1; ///< mLevelStart of the level mNextTangleCheck counts in
+    int mUntangledAt = 0;
+    std::size_t mTangleCrossings = 0;
+    bool mInvertedPart = false;  ///< a part turned inside out was deleted (removeSmallComponents)
+    bool mTangleInverted = false;
+    bool untangling() const { return mOptions.untangle && !mOptions.intersectionFree && mUntangledAt == 0; }
+    void checkTangle();
     const MetricField& mMetric;
     EvolutionOptions mOptions;
     std::vector<IterationStats> mHistory;

@@ -101,7 +101,9 @@ TopologyStats resolveTopology(Mesh& mesh, const std::vector<CollisionPair>& coll
 /// a cut, which have nothing to hold on to and would shrink into degenerate faces; and every
 /// component whose orientation contradicts its nesting (ComponentShape::outward(): turned inside
 /// out). A cavity's inner wall (negative volume inside a solid) is kept. Returns how many went.
-/// No garbage_collection().
-int removeSmallComponents(Mesh& mesh, std::size_t minVertices, double minVolume);
+/// `largestInverted` (if given): the most vertices of a component deleted only for being inside
+/// out (0: none), which a tangled surface leaves (Evolution then starts again, see
+/// EvolutionOptions::untangle). No garbage_collection().
+int removeSmallComponents(Mesh& mesh, std::size_t minVertices, double minVolume, std::size_t* largestInverted = nullptr);
 
 } // namespace riemesh
