@@ -467,16 +467,8 @@ void Evolution::updateConvergence()
     // are too coarse for the image. Start again from the initial surface without them.
     if (smallestComponent(mMesh) <= kCollapsedComponent) {
         mLevels.erase(mLevels.begin(), mLevels.begin() + mLevel + 1);
-        mMesh = mInitialMesh;
-        mSafeStepCache.invalidate();
+        restartFrom(mInitialMesh, total);
         if (mLevels.size() == 1) mInitialMesh = Mesh();
-        mLevel = 0;
-        mLevelStart = total;
-        mLastTopologyEvent = total;
-        mLastCut = mLastMerge = 0;
-        mComponents = -1;
-        mCutIdSeen = mHoldUntil = 0;
-        mChurn = mMesh.n_vertices();
         ++mRestarts;
         return;
     }
@@ -521,7 +513,7 @@ void Evolution::checkTangle()
     // too, whatever is left: the default mode's torus in stress case 8797090675329720181 vanished so.
     if (crossings < limit && !mInvertedPart) return;
     // Tangled: start again from the initial surface, every level, with the guarantee.
-    mMesh = mUntangleMesh;
+    restartFrom(mUntangleMesh, total);
     mUntangleMesh = Mesh();
     if (mLevels.size() > 1) mInitialMesh = mMesh;
     mOptions.intersectionFree = true;
@@ -530,6 +522,13 @@ void Evolution::checkTangle()
     mTangleInverted = mInvertedPart;
     mReason = StopReason::Running;
     mAttemptStart = total;
+    mPredictedVertices = 0;
+}
+
+void Evolution::restartFrom(const Mesh& initial, int total)
+{
+    mMesh = initial;
+    mSafeStepCache.invalidate();
     mLevel = 0;
     mLevelStart = total;
     mLastTopologyEvent = total;
@@ -537,8 +536,6 @@ void Evolution::checkTangle()
     mComponents = -1;
     mCutIdSeen = mHoldUntil = 0;
     mChurn = mMesh.n_vertices();
-    mPredictedVertices = 0;
-    mSafeStepCache.invalidate();
 }
 
 bool Evolution::settled(const EvolutionOptions& o, int w) const

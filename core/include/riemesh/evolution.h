@@ -185,6 +185,8 @@ private:
     bool mTangleInverted = false;
     bool untangling() const { return mOptions.untangle && !mOptions.intersectionFree && mUntangledAt == 0; }
     void checkTangle();
+    /// Replaces the mesh by `initial` and starts the first level over at iteration `total`.
+    void restartFrom(const Mesh& initial, int total);
     const MetricField& mMetric;
     EvolutionOptions mOptions;
     std::vector<IterationStats> mHistory;
