@@ -675,6 +675,7 @@ void App::drawPanels()
         mPanel.iteration = mIteration;
         mPanel.level = mEvolution ? mEvolution->level() : 0;
         mPanel.levels = mEvolution ? mEvolution->levels() : 1;
+        mPanel.untangledAt = mEvolution ? mEvolution->untangledAt() : 0;
         mPanel.merges = mMerges;
         mPanel.cuts = mCuts;
         mPanel.topology = mTopology;
@@ -688,6 +689,7 @@ void App::drawPanels()
         ImGui::Text("iteration %d  level %d of %d  (%s)", p.iteration, p.levels - p.level, p.levels, stateName());
     else
         ImGui::Text("iteration %d  (%s)", p.iteration, stateName());
+    if (p.untangledAt > 0) ImGui::Text("tangled at %d: again, intersection-free", p.untangledAt);
     ImGui::Text("vertices %zu  faces %zu", p.topology.vertices, p.topology.faces);
     ImGui::Text("components %d  genus %d", p.topology.components, p.topology.genus);
     ImGui::Text("merges %d  cuts %d  compute %.2f s", p.merges, p.cuts, p.computeSeconds);

@@ -184,6 +184,7 @@ private:
     struct PanelFigures {
         int iteration = 0, merges = 0, cuts = 0;
         int level = 0, levels = 1; ///< coarse-to-fine level being evolved (0: the finest) of levels
+        int untangledAt = 0;       ///< Evolution::untangledAt(): evolved again with the guarantee after
         MeshTopology topology;
         double computeSeconds = 0;
         int energyCount = 0; ///< entries of mEnergyLog plotted

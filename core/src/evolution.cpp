@@ -383,6 +383,7 @@ IterationStats Evolution::step()
     it.iteration = iteration;
     it.level = level();
     it.removedComponents = removed;
+    it.intersectionFree = o.intersectionFree;
     it.vertices = live;
     it.meanKineticEnergy = is.meanKineticEnergy;
     it.moving = is.moving;

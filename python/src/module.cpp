@@ -182,6 +182,7 @@ py::dict iterationDict(const IterationStats& s)
     d["cuts"] = s.cuts;
     d["removed_components"] = s.removedComponents;
     d["travelling"] = s.moving;
+    d["intersection_free"] = s.intersectionFree;
     d["ms"] = s.milliseconds;
     return d;
 }

@@ -45,10 +45,18 @@ extern "C" void onSigint(int)
 
 class ProgressBar {
 public:
-    ProgressBar(bool enabled, int maxIterations) : mEnabled(enabled), mMax(maxIterations) {}
+    ProgressBar(bool enabled, int maxIterations, bool intersectionFree)
+        : mEnabled(enabled), mMax(maxIterations), mIntersectionFree(intersectionFree)
+    {
+    }
     void update(const riemesh::IterationStats& s)
     {
         if (!mEnabled) return;
+        if (s.intersectionFree && !mIntersectionFree) { // the default mode tangled (EvolutionOptions::untangle)
+            mIntersectionFree = true;
+            std::fprintf(stderr, "\r%*s\rvdb2mesh: the surface tangled; evolving it again from the start with "
+                                 "--intersection-free\n", 90, "");
+        }
         const auto now = std::chrono::steady_clock::now();
         if (now - mLast < std::chrono::milliseconds(100)) return;
         mLast = now;
@@ -67,6 +75,7 @@ public:
 private:
     bool mEnabled;
     int mMax;
+    bool mIntersectionFree; ///< the evolution runs (or was asked to run) with the guarantee
     bool mDrawn = false;
     std::chrono::steady_clock::time_point mLast{};
 };
@@ -202,7 +211,7 @@ int main(int argc, char** argv)
         return 130;
     };
     if (gInterrupted) return interrupted();
-    ProgressBar bar(tty, args.maxIterations);
+    ProgressBar bar(tty, args.maxIterations, options.intersectionFree);
     try {
         options.progress = [&](vdb::PipelineStage stage, const IterationStats* s) {
             if (s) {

@@ -417,6 +417,7 @@ std::string pipelineStatsJson(const PipelineResult& r, const PipelineRecord& rec
                               {"cuts", s.cuts},
                               {"removed_components", s.removedComponents},
                               {"travelling", s.moving},
+                              {"intersection_free", s.intersectionFree},
                               {"ms", s.milliseconds}});
     j["iterations"] = std::move(iterations);
     const auto& e = r.evolution;

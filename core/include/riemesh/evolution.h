@@ -28,6 +28,7 @@ struct IterationStats {
     std::size_t moving = 0; ///< vertices still travelling (faster than half the free-flight speed)
     int splits = 0, collapses = 0, flips = 0, merges = 0, cuts = 0;
     int removedComponents = 0; ///< specks left by cuts and deleted (see removeSmallComponents)
+    bool intersectionFree = false; ///< evolved with the guarantee (asked for, or after a tangle: untangledAt())
     double milliseconds = 0;
     /// Where the milliseconds went: forces, integration, regularity (paper 3.1), collision
     /// detection (3.2), topology changes and housekeeping (holds, specks, compaction).
