@@ -334,7 +334,7 @@ IterationStats Evolution::step()
         const double fine = mOptions.delta * mLevels.back().scale;
         std::size_t inverted = 0;
         removed = removeSmallComponents(mMesh, coarse ? 4 : 6, 0.5 * fine * fine * fine, &inverted);
-        mInvertedPart = mInvertedPart || inverted > kCollapsedComponent; // a tangle's (see checkTangle)
+        if (untangling()) mInvertedPart = mInvertedPart || inverted > kCollapsedComponent; // a tangle's (checkTangle)
     }
     // A component that has shrunk to a handful of vertices on the finest level around nothing it
     // can hold on to (the initial box of a noise blob, an object below delta) is turned inside
@@ -514,13 +514,11 @@ void Evolution::checkTangle()
     // too, whatever is left: the default mode's torus in stress case 8797090675329720181 vanished so.
     if (crossings < limit && !mInvertedPart) return;
     // Tangled: start again from the initial surface, every level, with the guarantee.
-    restartFrom(mUntangleMesh, total);
+    restartFrom(mUntangleMesh, total); // (mInitialMesh, kept while coarse levels remain, is the same)
     mUntangleMesh = Mesh();
-    if (mLevels.size() > 1) mInitialMesh = mMesh;
     mOptions.intersectionFree = true;
     mUntangledAt = total;
     mTangleCrossings = crossings;
-    mTangleInverted = mInvertedPart;
     mReason = StopReason::Running;
     mAttemptStart = total;
     mPredictedVertices = 0;

@@ -97,8 +97,9 @@ struct EvolutionOptions {
     /// surface is checked (findSelfIntersections) tangleCheckFirst iterations into each level, then
     /// at 2x, 4x ... that, and when the evolution ends (converged or capped). A surface with any
     /// crossing at its end, or at least max(tangleCrossings, 0.5% of its faces) at a check, or
-    /// that lost a part of more than a handful of vertices for being inside out, is tangled: the evolution starts again from the initial surface with intersectionFree on, which
-    /// keeps it embedded (untangledAt()). Off: untangle = false (a tangled result is then returned).
+    /// that lost a part of more than a handful of vertices for being inside out, is tangled: the
+    /// evolution starts again from the initial surface with intersectionFree on, which keeps it
+    /// embedded (untangledAt()). Off: untangle = false (a tangled result is then returned).
     bool untangle = true;
     int tangleCheckFirst = 32;
     std::size_t tangleCrossings = 64;
@@ -157,7 +158,7 @@ public:
     /// tangleInverted(): a part of more than a handful of vertices had turned inside out.
     int untangledAt() const { return mUntangledAt; }
     std::size_t tangleCrossings() const { return mTangleCrossings; }
-    bool tangleInverted() const { return mTangleInverted; }
+    bool tangleInverted() const { return mUntangledAt > 0 && mInvertedPart; }
     const std::vector<IterationStats>& history() const { return mHistory; }
     const EvolutionOptions& options() const { return mOptions; }
     /// The level being evolved, counted from the finest (0) up; levels() in all.
@@ -182,8 +183,8 @@ private:
     int mTangleLevelStart = -1; ///< mLevelStart of the level mNextTangleCheck counts in
     int mUntangledAt = 0;
     std::size_t mTangleCrossings = 0;
-    bool mInvertedPart = false;  ///< a part turned inside out was deleted (removeSmallComponents)
-    bool mTangleInverted = false;
+    /// Before any restart: a part turned inside out was deleted (removeSmallComponents).
+    bool mInvertedPart = false;
     bool untangling() const { return mOptions.untangle && !mOptions.intersectionFree && mUntangledAt == 0; }
     void checkTangle();
     /// Replaces the mesh by `initial` and starts the first level over at iteration `total`.
