@@ -1,6 +1,6 @@
 // collision_bench: cost of findCollisions against the vertex count.
 //
-//   collision_bench [--quick] [--calls N] [--cache DIR] [target ...]
+//   collision_bench [--quick] [--calls N] [--threads T] [--cache DIR] [target ...]
 //
 // For each target vertex count (default 1k, 5k, 20k, 80k; --quick: 1k, 5k) a sphere of radius 30
 // is evolved for 40 iterations on a ball image with delta chosen for ~target vertices (edges
@@ -22,6 +22,7 @@
 #include "riemesh/evolution.h"
 #include "riemesh/mesh_io.h"
 #include "riemesh/primitives.h"
+#include "riemesh/threads.h"
 
 #include <algorithm>
 #include <chrono>
@@ -92,17 +93,21 @@ int main(int argc, char** argv)
 {
     bool quick = false;
     int calls = 200;
+    int threads = 1;
     std::string cache;
     std::vector<int> targets;
     for (int i = 1; i < argc; ++i) {
         if (std::strcmp(argv[i], "--quick") == 0) quick = true;
         else if (std::strcmp(argv[i], "--calls") == 0 && i + 1 < argc) calls = std::max(1, std::atoi(argv[++i]));
+        else if (std::strcmp(argv[i], "--threads") == 0 && i + 1 < argc) threads = std::max(1, std::atoi(argv[++i]));
         else if (std::strcmp(argv[i], "--cache") == 0 && i + 1 < argc) cache = argv[++i];
         else targets.push_back(std::atoi(argv[i]));
     }
     if (targets.empty()) targets = quick ? std::vector<int>{1000, 5000} : std::vector<int>{1000, 5000, 20000, 80000};
 
-    std::printf("riemesh collision_bench (one thread, %d calls per size and metric)\n", calls);
+    setThreadCount(threads);
+    std::printf("riemesh collision_bench (%d thread%s, %d calls per size and metric)\n", threads,
+                threads == 1 ? "" : "s", calls);
     std::printf("%8s %9s %7s | %-37s | %-37s\n", "target", "vertices", "delta", "euclidean: best/mean/cpu ms, ns/v",
                 "anisotropic: best/mean/cpu ms, ns/v");
     const double radius = 30;

@@ -246,11 +246,14 @@ IterationStats Evolution::step()
         mStepStart.resize(mMesh.n_vertices());
         for (auto v : mMesh.vertices()) mStepStart[std::size_t(v.idx())] = position(mMesh, v);
     }
-    const IntegrationStats is = integrate(mMesh, mForces, io);
+    IntegrationStats is = integrate(mMesh, mForces, io);
     if (o.intersectionFree) {
+        mStepEnd.resize(mMesh.n_vertices());
+        for (auto v : mMesh.vertices()) mStepEnd[std::size_t(v.idx())] = position(mMesh, v);
         SafeStepOptions so;
         so.minSeparation = o.minSeparation * o.delta;
-        limitStepToCollisionFree(mMesh, mStepStart, so, &mSafeStepCache);
+        const SafeStepStats ss = limitStepToCollisionFree(mMesh, mStepStart, so, &mSafeStepCache);
+        if (ss.shortened > 0) is = accountForShortenedStep(mMesh, mStepStart, mStepEnd, io);
     }
     vertexMetrics.update(); // every vertex that moved
     phase(it.phases.integration);

@@ -4,6 +4,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <stdexcept>
 #include <vector>
 
 namespace riemesh {
@@ -11,11 +12,29 @@ namespace riemesh {
 namespace {
 /// Vertices per parallel chunk.
 constexpr std::size_t kGrain = 128;
+
+/// The step's statistics from per-vertex figures, summed in index order (the same for any thread
+/// count).
+IntegrationStats sumStats(const Mesh& mesh, const double* vertexEnergy, const double* maxStep, const char* moving)
+{
+    IntegrationStats stats;
+    const bool vertexStatus = mesh.has_vertex_status();
+    double energy = 0;
+    std::size_t count = 0;
+    for (std::size_t i = 0, n = mesh.n_vertices(); i < n; ++i) {
+        if (vertexStatus && mesh.status(VertexHandle(int(i))).deleted()) continue;
+        energy += vertexEnergy[i];
+        stats.maxDisplacement = std::max(stats.maxDisplacement, maxStep[i]);
+        stats.moving += std::size_t(moving[i]);
+        ++count;
+    }
+    stats.meanKineticEnergy = count ? energy / double(count) : 0.0;
+    return stats;
+}
 } // namespace
 
 IntegrationStats integrate(Mesh& mesh, const std::vector<Vec3>& forces, const IntegrationOptions& options)
 {
-    IntegrationStats stats;
     const auto velocity = velocityProperty(mesh);
     OpenMesh::VPropHandleT<Drift> drift;
     if (!mesh.get_property_handle(drift, kDriftProperty)) mesh.add_property(drift, kDriftProperty);
@@ -81,17 +100,43 @@ IntegrationStats integrate(Mesh& mesh, const std::vector<Vec3>& forces, const In
         m.z = keep * m.z + (1 - keep) * d.z();
         moving[i] = m.x * m.x + m.y * m.y + m.z * m.z > options.movingSpeed * options.movingSpeed;
     });
-    double energy = 0;
-    std::size_t count = 0;
-    for (std::size_t i = 0; i < n; ++i) {
-        if (deleted(i)) continue;
-        energy += vertexEnergy[i];
-        stats.maxDisplacement = std::max(stats.maxDisplacement, maxStep[i]);
-        stats.moving += std::size_t(moving[i]);
-        ++count;
-    }
-    stats.meanKineticEnergy = count ? energy / double(count) : 0.0;
-    return stats;
+    return sumStats(mesh, vertexEnergy, maxStep, moving);
+}
+
+IntegrationStats accountForShortenedStep(Mesh& mesh, const std::vector<Vec3>& start, const std::vector<Vec3>& intended,
+                                         const IntegrationOptions& options)
+{
+    const auto velocity = velocityProperty(mesh);
+    OpenMesh::VPropHandleT<Drift> drift;
+    if (!mesh.get_property_handle(drift, kDriftProperty)) mesh.add_property(drift, kDriftProperty);
+    const double share = 1 - options.driftDecay; // the weight integrate() gave this step's displacement
+    const std::size_t n = mesh.n_vertices();
+    if (start.size() < n || intended.size() < n)
+        throw std::invalid_argument("accountForShortenedStep: need a start and an intended position per vertex");
+    static thread_local std::vector<double> energyBuffer, stepBuffer;
+    static thread_local std::vector<char> movingBuffer;
+    energyBuffer.resize(n);
+    stepBuffer.resize(n);
+    movingBuffer.resize(n);
+    double* const vertexEnergy = energyBuffer.data();
+    double* const maxStep = stepBuffer.data();
+    char* const moving = movingBuffer.data();
+    const bool vertexStatus = mesh.has_vertex_status();
+    detail::parallelFor(0, n, kGrain, [&](std::size_t i) {
+        const VertexHandle v{int(i)};
+        if (vertexStatus && mesh.status(v).deleted()) return;
+        const Vec3 now = position(mesh, v);
+        Drift& m = mesh.property(drift, v);
+        if (now != intended[i]) {
+            const Vec3 lost = share * (intended[i] - now);
+            m.x -= lost.x(), m.y -= lost.y(), m.z -= lost.z();
+        }
+        const auto& u = mesh.property(velocity, v);
+        vertexEnergy[i] = 0.5 * options.mass * (u[0] * u[0] + u[1] * u[1] + u[2] * u[2]);
+        maxStep[i] = (now - start[i]).norm();
+        moving[i] = m.x * m.x + m.y * m.y + m.z * m.z > options.movingSpeed * options.movingSpeed;
+    });
+    return sumStats(mesh, vertexEnergy, maxStep, moving);
 }
 
 } // namespace riemesh

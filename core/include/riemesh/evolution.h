@@ -194,6 +194,7 @@ private:
     std::vector<IterationStats> mHistory;
     std::vector<Vec3> mForces;
     std::vector<Vec3> mStepStart; ///< positions before integration (intersectionFree)
+    std::vector<Vec3> mStepEnd;   ///< where integration meant them to go (intersectionFree)
     SafeStepCache mSafeStepCache; ///< the collision-safe step's clearances (intersectionFree)
     StopReason mReason = StopReason::Running;
     int mLastTopologyEvent = 0;

@@ -49,4 +49,13 @@ inline constexpr const char* kHoldProperty = "riemesh:contact";
 /// not move along it (and the direction is cleared).
 IntegrationStats integrate(Mesh& mesh, const std::vector<Vec3>& forces, const IntegrationOptions& options);
 
+/// After limitStepToCollisionFree shortened the step of some vertices (and scaled their
+/// velocities): their drift counts how far they moved, not how far integrate() meant them to, and
+/// the statistics are measured again, so that a vertex held back against another sheet does not
+/// count as travelling forever (an --intersection-free run then never converged: a head MRI block,
+/// 19 such vertices until the 3,000-iteration cap). `start`: the positions before integrate();
+/// `intended`: the positions it left.
+IntegrationStats accountForShortenedStep(Mesh& mesh, const std::vector<Vec3>& start, const std::vector<Vec3>& intended,
+                                         const IntegrationOptions& options);
+
 } // namespace riemesh
