@@ -92,6 +92,34 @@ void computeForces(const Mesh& mesh, const ScalarImage& image, const ForceOption
         }
     });
 
+    // Signed distance to the isosurface estimated at a point (world units, > 0 inside).
+    auto distanceAt = [&](const Vec3& x) {
+        double value;
+        if (options.contrast > 0) {
+            value = image.value(x);
+            return delta * (value - options.iso) / options.contrast;
+        }
+        Vec3 gradient;
+        image.sample(x, value, gradient);
+        return (value - options.iso) / std::max(gradient.norm(), 1e-12 / delta);
+    };
+    // With face samples, each face's centroid is sampled too (see ForceOptions::vertexShare).
+    static thread_local std::vector<double> faceDistanceBuffer;
+    const bool faceSamples = options.vertexShare < 1.0;
+    if (faceSamples) {
+        faceDistanceBuffer.resize(faceCount);
+        double* const fd = faceDistanceBuffer.data();
+        detail::parallelFor(0, faceCount, kGrain, [&](std::size_t fi) {
+            const FaceHandle f{int(fi)};
+            if (faceStatus && mesh.status(f).deleted()) return;
+            const auto h0 = mesh.halfedge_handle(f);
+            const auto h1 = mesh.next_halfedge_handle(h0);
+            const Vec3 centroid = (position(mesh, mesh.from_vertex_handle(h0)) + position(mesh, mesh.to_vertex_handle(h0)) +
+                                   position(mesh, mesh.to_vertex_handle(h1))) / 3.0;
+            fd[fi] = distanceAt(centroid);
+        });
+    }
+    const double* const faceDistance = faceDistanceBuffer.data();
     const double sign = options.objectBrighter ? 1.0 : -1.0;
     const double gradientStep = 0.5 * image.voxelSize();
     Vec3* const force = forces.data();
@@ -106,15 +134,17 @@ void computeForces(const Mesh& mesh, const ScalarImage& image, const ForceOption
         // External: inflation/deflation toward I = iso along the normal. The signed distance to the
         // isosurface is estimated as (I - iso)/|grad I| (a Newton step) unless a fixed contrast is given;
         // the pull is stiff near the surface and saturates at externalLimit * delta.
-        double value;
-        double distance; // estimated signed distance to the isosurface (world units), > 0 inside
-        if (options.contrast > 0) {
-            value = image.value(x);
-            distance = delta * (value - options.iso) / options.contrast;
-        } else {
-            Vec3 gradient;
-            image.sample(x, value, gradient);
-            distance = (value - options.iso) / std::max(gradient.norm(), 1e-12 / delta);
+        double distance = distanceAt(x); // estimated signed distance to the isosurface (world units), > 0 inside
+        if (faceSamples) { // blended with its faces' (area-weighted, in the circulator's order)
+            double sum = 0, area = 0;
+            for (auto h = mesh.cvoh_begin(v); h.is_valid(); ++h) {
+                const FaceHandle f = mesh.face_handle(*h);
+                if (!f.is_valid()) continue;
+                const double a = faceNormal[f.idx()].norm();
+                sum += a * faceDistance[f.idx()];
+                area += a;
+            }
+            if (area > 0) distance = options.vertexShare * distance + (1 - options.vertexShare) * sum / area;
         }
         const double limit = options.externalLimit * delta;
         const double push = std::max(-limit, std::min(limit, options.externalWeight * sign * distance));

@@ -34,6 +34,7 @@ def assert_same_mesh(result, vertices, faces):
     (("--zeta", "3", "--smooth", "0.5", "--downsample", "2", "--open-borders"),
      {"zeta": 3, "smooth": 0.5, "downsample": 2, "open_borders": True}),
     (("--sharpen",), {"sharpen": True}),
+    (("--face-samples",), {"face_samples": True}),
 ])
 def test_file_path_gives_vdb2mesh_mesh(bin_dir, tmp_path, phantom_file, flags, kwargs):
     vertices, faces, _ = vdb2mesh(bin_dir, tmp_path, phantom_file, *flags)

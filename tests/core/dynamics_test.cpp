@@ -54,6 +54,26 @@ TEST_CASE("forces: on the isosurface the external force nearly vanishes")
     CHECK(std::abs(meanRadialForce(onSurface, forces)) < 0.02);
 }
 
+TEST_CASE("forces: with face samples, corners on a sphere are pushed out by their faces' sag")
+{
+    // A coarse icosphere (edges ~4.5) with its vertices on the isosurface: its faces lie inside the
+    // ball (the centroid of a face by ~0.4), which the vertex samples cannot see and face samples do.
+    const auto image = ballImage(8.0);
+    ForceOptions options;
+    options.internalWeight = 0;
+    options.curvatureWeight = 0;
+    std::vector<Vec3> forces;
+    Mesh onSurface = makeIcosphere(Vec3::Zero(), 8.0, 1);
+    computeForces(onSurface, image, options, 1.0, forces);
+    const double cornersOnly = meanRadialForce(onSurface, forces);
+    options.vertexShare = kFaceSampleVertexShare;
+    computeForces(onSurface, image, options, 1.0, forces);
+    const double withFaces = meanRadialForce(onSurface, forces);
+    INFO("mean radial force: vertex samples " << cornersOnly << ", face samples " << withFaces);
+    CHECK(std::abs(cornersOnly) < 0.05);
+    CHECK(withFaces > cornersOnly + 0.1);
+}
+
 TEST_CASE("forces: far from the isosurface the push saturates at externalLimit * delta")
 {
     const auto image = ballImage(4.0);

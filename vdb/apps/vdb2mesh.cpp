@@ -173,6 +173,7 @@ int main(int argc, char** argv)
         options.openBorders = args.openBorders;
         options.intersectionFree = args.intersectionFree;
         options.sharpen = args.sharpen;
+        options.faceSamples = args.faceSamples;
         options.downsample = args.downsample;
         options.levels = args.levels;
         options.threads = args.threads;

@@ -43,6 +43,7 @@ struct Vdb2MeshArgs {
     bool openBorders = false;          ///< --open-borders: do not close objects cut by the image box
     bool intersectionFree = false;     ///< --intersection-free: the guarantee (EvolutionOptions)
     bool sharpen = false;              ///< --sharpen: creases and corners (PipelineOptions::sharpen)
+    bool faceSamples = false;          ///< --face-samples (PipelineOptions::faceSamples)
     int downsample = 1;                ///< --downsample F: block-average F^3 voxels first
     int levels = -1;                   ///< --levels L (-1: auto)
     double tangentialGain = kTangentialGain; ///< --edge-gain: boost of the metric at edges and corners

@@ -282,6 +282,7 @@ PipelineResult meshVolume(Volume& volume, const PipelineOptions& options)
     opt.intersectionFree = options.intersectionFree;
     opt.forces.iso = iso;
     opt.forces.objectBrighter = objectBrighter;
+    if (options.faceSamples) opt.forces.vertexShare = kFaceSampleVertexShare;
     if (options.progress) opt.progress = [&](const IterationStats& s) { return report(PipelineStage::Evolve, &s); };
 
     // The initial surface is sampled for the level it starts on (the coarsest).
@@ -395,6 +396,7 @@ std::string pipelineStatsJson(const PipelineResult& r, const PipelineRecord& rec
                        {"open_borders", o.openBorders},
                        {"intersection_free", o.intersectionFree},
                        {"sharpen", o.sharpen},
+                       {"face_samples", o.faceSamples},
                        {"border_voxels_added", r.borderVoxels},
                        {"downsample", o.downsample},
                        {"levels", r.levels},

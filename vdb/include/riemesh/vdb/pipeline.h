@@ -97,6 +97,12 @@ struct PipelineOptions {
     /// also flattens the fine, rounded relief of organic shapes. A vertex moves at most
     /// kSharpenMaxMove voxels; the result is kept only if it crosses itself no more than before.
     bool sharpen = false;
+    /// The external force samples the image at the faces' centroids as well as at the vertices
+    /// (ForceOptions::vertexShare = kFaceSampleVertexShare, --face-samples): the faces, not only their
+    /// corners, come to lie on the isosurface, and each vertex averages more of the noise. Off by
+    /// default while it is evaluated: it costs ~25% more per iteration, and it keeps objects of a
+    /// voxel or two (noise specks) that the vertex samples alone let shrink away.
+    bool faceSamples = false;
     int downsample = 1;             ///< block-average F^3 voxels first, [1, 64]
     /// Coarse-to-fine levels below the finest (--levels): the model converges first with delta 2^L
     /// on an image of 2^L-voxel blocks, then with half of it, ..., then the image as it is. -1: as
