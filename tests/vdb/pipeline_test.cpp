@@ -242,7 +242,8 @@ TEST_CASE("pipeline: with the guarantee, vertices held back by it do not keep a 
     CHECK(r.selfIntersections == 0);
     std::map<int, int> perLevel;
     for (const auto& it : r.evolution.iterations) ++perLevel[it.level];
-    for (const auto& [level, iterations] : perLevel) {
+    for (const auto& entry : perLevel) { // (no structured binding: clang 14 cannot capture one in INFO)
+        const int level = entry.first, iterations = entry.second;
         INFO("level " << level << ": " << iterations << " iterations");
         CHECK(iterations < 150);
     }

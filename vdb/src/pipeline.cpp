@@ -342,6 +342,10 @@ PipelineResult meshVolume(Volume& volume, const PipelineOptions& options)
         for (auto v : r.mesh.vertices()) kept.push_back(r.mesh.point(v));
         SharpenOptions so;
         so.maxMove = kSharpenMaxMove * h;
+        so.image = &image;
+        so.iso = iso;
+        so.objectBrighter = objectBrighter;
+        so.maxOutside = kSharpenMaxOutside * h;
         const SharpenStats ss = sharpenFeatures(r.mesh, so);
         r.sharpened = ss.moved;
         if (findSelfIntersections(r.mesh).count() > before) {

@@ -17,6 +17,7 @@
 // head MRI: 0.225 -> 0.311 mm from the image's isosurface near the skin, on average).
 #pragma once
 
+#include "riemesh/image.h"
 #include "riemesh/mesh.h"
 
 #include <limits>
@@ -34,6 +35,13 @@ struct SharpenOptions {
     /// blur of sigma 1 pulls a cube's corner in by about 1.4 voxels) ...
     double maxMove = std::numeric_limits<double>::infinity();
     double maxMoveEdges = 2.0; ///< ... and times the mean length of its edges
+    /// With an image: no vertex is moved where the image puts it farther than maxOutside outside the
+    /// isosurface (estimated as (I - iso) / |grad I|): a thin plate's rim, too thin for the mesh to
+    /// have faces on, otherwise grows a fin out to where the top and bottom planes are extended.
+    const ScalarImage* image = nullptr;
+    double iso = 0.5;
+    bool objectBrighter = true;
+    double maxOutside = std::numeric_limits<double>::infinity();
 };
 
 struct SharpenStats {
