@@ -163,6 +163,13 @@ class Bench:
 
 
 # ---- small helpers -------------------------------------------------------------------------------
+# Issue 16's side by side: riemesh's options that are off by default (name, flags, file suffix), and
+# every method of its tables in order.
+SHARP_VARIANTS = [("riemesh --sharpen", ["--sharpen"], "S"),
+                  ("riemesh --face-samples", ["--face-samples"], "F"),
+                  ("riemesh --face-samples --sharpen", ["--face-samples", "--sharpen"], "FS")]
+SHARP_METHODS = ("riemesh",) + tuple(v[0] for v in SHARP_VARIANTS) + ("volumeToMesh", "CGAL Mesh_3")
+
 def parse_csv(text):
     lines = [l for l in text.splitlines() if l.strip()]
     rows, header = [], None
@@ -633,7 +640,9 @@ class Report:
                      "mesh->true mean over ~4 samples per square voxel of the mesh, true->mesh mean from samples of the "
                      "true surface, its edges and corners included, Hausdorff = the larger of the two maxima; voxels). "
                      "**riemesh**: `vdb2mesh` defaults; **riemesh --sharpen**: the same with `--sharpen` (creases and "
-                     "corners put back on the converged surface, off by default). **volumeToMesh**: `vdb_bench mesh` after OpenVDB's "
+                     "corners put back on the converged surface, off by default); **riemesh --face-samples**: with "
+                     "`--face-samples` (the image force sampled at the faces' centres as well as at the vertices, off "
+                     "by default), and with both. **volumeToMesh**: `vdb_bench mesh` after OpenVDB's "
                      "`tools::Filter::gaussian` (width:iterations) %s, adaptivities %s; its best setting over all of them by the peers "
                      "section's rule (the fewest vertices among settings at most as far from the surface, mesh->true, "
                      "as riemesh; else the most accurate). **CGAL Mesh_3**: `cgal_bench` (CGAL %s, "
@@ -670,15 +679,17 @@ class Report:
                         seconds=(r["seconds"] - r.get("read_seconds", 0.0) - r.get("write_seconds", 0.0))
                         if ok(r) else None)
             rows.append(rrow)
-            # The same with --sharpen (creases and corners put back; off by default).
-            rs = b.vdb2mesh("sharp_%s_S" % tag, img, ["--sharpen"], self.timeout)
-            rows.append(dict(image=label, method="riemesh --sharpen", setting="vdb2mesh --sharpen",
-                             vertices=rs.get("vertices"), mean_voxels=rs.get("mean"),
-                             surface_mean_voxels=rs.get("surface_mean"), hausdorff_voxels=rs.get("hausdorff"),
-                             components=rs.get("components"), genus=rs.get("genus"), closed_manifold=1,
-                             status=rs["status"], mesh=rs["mesh"],
-                             seconds=(rs["seconds"] - rs.get("read_seconds", 0.0) - rs.get("write_seconds", 0.0))
-                             if ok(rs) else None))
+            # The same with the options that are off by default: --sharpen (creases and corners put back),
+            # --face-samples (the image force sampled at the faces' centres too), and both.
+            for method, flags, suffix in SHARP_VARIANTS:
+                rs = b.vdb2mesh("sharp_%s_%s" % (tag, suffix), img, flags, self.timeout)
+                rows.append(dict(image=label, method=method, setting="vdb2mesh " + " ".join(flags),
+                                 vertices=rs.get("vertices"), mean_voxels=rs.get("mean"),
+                                 surface_mean_voxels=rs.get("surface_mean"), hausdorff_voxels=rs.get("hausdorff"),
+                                 components=rs.get("components"), genus=rs.get("genus"), closed_manifold=1,
+                                 status=rs["status"], mesh=rs["mesh"],
+                                 seconds=(rs["seconds"] - rs.get("read_seconds", 0.0) - rs.get("write_seconds", 0.0))
+                                 if ok(rs) else None))
             # Mesh files only for the image pictured (vdb_bench writes no file for an empty mesh, and the thin
             # plate smoothed at width 2 has no voxel left above the iso value).
             pictured = (shape, noise, seed) == images[0]
@@ -750,7 +761,7 @@ class Report:
                 groups.append((shape, noise))
         summary = []
         for shape, noise in groups:
-            for method in ("riemesh", "riemesh --sharpen", "volumeToMesh", "CGAL Mesh_3"):
+            for method in SHARP_METHODS:
                 xs = [x for x in rows if ok(x) and x["image"].startswith("%s, noise %g," % (shape, noise))
                       and x["method"].split(" (")[0] == method and x.get("hausdorff_voxels") is not None]
                 if not xs:
@@ -769,7 +780,7 @@ class Report:
                 ("one comp., genus 0", lambda x: "%d of %d" % (x["topo"], x["n"])),
                 ("seconds", lambda x: fmt(x["seconds"]))], summary))
         # The issue's targets, from these numbers.
-        lines = ["\nIssue 16's targets on these images (riemesh's targets, at its defaults; --sharpen and the peers' "
+        lines = ["\nIssue 16's targets on these images (riemesh's targets, at its defaults; its options and the peers' "
                  "numbers beside them):\n"]
         def target_line(what, pick, key, limit):
             per = {}
@@ -779,7 +790,7 @@ class Report:
             if not per:
                 return "- %s: **not measured**." % what
             parts = []
-            for method in ("riemesh", "riemesh --sharpen", "volumeToMesh", "CGAL Mesh_3"):
+            for method in SHARP_METHODS:
                 v = per.get(method)
                 if v:
                     met = sum(1 for y in v if y <= limit)
@@ -797,7 +808,7 @@ class Report:
         self.md.append("\n".join(lines) + "\n")
         # One picture of each method on the first cube (seen from a corner).
         pics = []
-        for method in ("riemesh", "riemesh --sharpen", "volumeToMesh", "CGAL Mesh_3"):
+        for method in SHARP_METHODS:
             x = next((y for k, y in corner.items() if k.split(" (")[0] == method), None)
             if not x or not ok(x) or not os.path.exists(x.get("mesh", "")):
                 continue
