@@ -13,9 +13,27 @@ namespace {
 /// Vertices per parallel chunk.
 constexpr std::size_t kGrain = 128;
 
+/// Per-vertex figures of a step (kinetic energy, displacement, moving), in buffers kept between
+/// calls (no allocation per iteration). Plain pointers: a thread_local named inside a parallel body
+/// would be the worker's own.
+struct PerVertex {
+    double* energy;
+    double* step;
+    char* moving;
+};
+PerVertex perVertexBuffers(std::size_t n)
+{
+    static thread_local std::vector<double> energy, step;
+    static thread_local std::vector<char> moving;
+    energy.resize(n);
+    step.resize(n);
+    moving.resize(n);
+    return {energy.data(), step.data(), moving.data()};
+}
+
 /// The step's statistics from per-vertex figures, summed in index order (the same for any thread
 /// count).
-IntegrationStats sumStats(const Mesh& mesh, const double* vertexEnergy, const double* maxStep, const char* moving)
+IntegrationStats sumStats(const Mesh& mesh, const PerVertex& per)
 {
     IntegrationStats stats;
     const bool vertexStatus = mesh.has_vertex_status();
@@ -23,9 +41,9 @@ IntegrationStats sumStats(const Mesh& mesh, const double* vertexEnergy, const do
     std::size_t count = 0;
     for (std::size_t i = 0, n = mesh.n_vertices(); i < n; ++i) {
         if (vertexStatus && mesh.status(VertexHandle(int(i))).deleted()) continue;
-        energy += vertexEnergy[i];
-        stats.maxDisplacement = std::max(stats.maxDisplacement, maxStep[i]);
-        stats.moving += std::size_t(moving[i]);
+        energy += per.energy[i];
+        stats.maxDisplacement = std::max(stats.maxDisplacement, per.step[i]);
+        stats.moving += std::size_t(per.moving[i]);
         ++count;
     }
     stats.meanKineticEnergy = count ? energy / double(count) : 0.0;
@@ -45,17 +63,11 @@ IntegrationStats integrate(Mesh& mesh, const std::vector<Vec3>& forces, const In
     const double invMass = 1.0 / options.mass;
     // Every vertex in parallel (each writes only its own properties); its kinetic energy goes to a
     // per-vertex array summed in index order afterwards, so the mean is the same for any thread count.
-    // The arrays are kept between calls (no allocation per iteration); plain pointers from here on:
-    // a thread_local named inside a parallel body would be the worker's own.
     const std::size_t n = mesh.n_vertices();
-    static thread_local std::vector<double> energyBuffer, stepBuffer;
-    static thread_local std::vector<char> movingBuffer;
-    energyBuffer.resize(n);
-    stepBuffer.resize(n);
-    movingBuffer.resize(n);
-    double* const vertexEnergy = energyBuffer.data();
-    double* const maxStep = stepBuffer.data();
-    char* const moving = movingBuffer.data();
+    const PerVertex per = perVertexBuffers(n);
+    double* const vertexEnergy = per.energy;
+    double* const maxStep = per.step;
+    char* const moving = per.moving;
     const bool vertexStatus = mesh.has_vertex_status();
     auto deleted = [&](std::size_t i) { return vertexStatus && mesh.status(VertexHandle(int(i))).deleted(); };
     detail::parallelFor(0, n, kGrain, [&](std::size_t i) {
@@ -100,7 +112,7 @@ IntegrationStats integrate(Mesh& mesh, const std::vector<Vec3>& forces, const In
         m.z = keep * m.z + (1 - keep) * d.z();
         moving[i] = m.x * m.x + m.y * m.y + m.z * m.z > options.movingSpeed * options.movingSpeed;
     });
-    return sumStats(mesh, vertexEnergy, maxStep, moving);
+    return sumStats(mesh, per);
 }
 
 IntegrationStats accountForShortenedStep(Mesh& mesh, const std::vector<Vec3>& start, const std::vector<Vec3>& intended,
@@ -113,14 +125,10 @@ IntegrationStats accountForShortenedStep(Mesh& mesh, const std::vector<Vec3>& st
     const std::size_t n = mesh.n_vertices();
     if (start.size() < n || intended.size() < n)
         throw std::invalid_argument("accountForShortenedStep: need a start and an intended position per vertex");
-    static thread_local std::vector<double> energyBuffer, stepBuffer;
-    static thread_local std::vector<char> movingBuffer;
-    energyBuffer.resize(n);
-    stepBuffer.resize(n);
-    movingBuffer.resize(n);
-    double* const vertexEnergy = energyBuffer.data();
-    double* const maxStep = stepBuffer.data();
-    char* const moving = movingBuffer.data();
+    const PerVertex per = perVertexBuffers(n);
+    double* const vertexEnergy = per.energy;
+    double* const maxStep = per.step;
+    char* const moving = per.moving;
     const bool vertexStatus = mesh.has_vertex_status();
     detail::parallelFor(0, n, kGrain, [&](std::size_t i) {
         const VertexHandle v{int(i)};
@@ -136,7 +144,7 @@ IntegrationStats accountForShortenedStep(Mesh& mesh, const std::vector<Vec3>& st
         maxStep[i] = (now - start[i]).norm();
         moving[i] = m.x * m.x + m.y * m.y + m.z * m.z > options.movingSpeed * options.movingSpeed;
     });
-    return sumStats(mesh, vertexEnergy, maxStep, moving);
+    return sumStats(mesh, per);
 }
 
 } // namespace riemesh
