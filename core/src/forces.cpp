@@ -28,7 +28,7 @@ void computeForces(const Mesh& mesh, const ScalarImage& image, const ForceOption
     // gathered per vertex around it (sorting each vertex's faces and edges by index, to sum as one
     // pass over the faces would, doubled the cost of an iteration at one thread).
     static thread_local std::vector<Vec3> normalBuffer, neighbourSumBuffer, faceNormalBuffer;
-    static thread_local std::vector<double> weightSumBuffer, edgeWeightBuffer;
+    static thread_local std::vector<double> weightSumBuffer, edgeWeightBuffer, faceDistanceBuffer;
     static thread_local std::vector<Mat3> tensorBuffer;
     // Plain pointers from here on: a thread_local named inside a parallel body would be the
     // worker's own buffer, not this one.
@@ -52,9 +52,18 @@ void computeForces(const Mesh& mesh, const ScalarImage& image, const ForceOption
         });
     }
     const Mat3* const tensor = tensorBuffer.data();
+    // Signed distance to the isosurface estimated at a point (world units, > 0 inside).
+    auto distanceAt = [&](const Vec3& x) {
+        if (options.contrast > 0) return delta * (image.value(x) - options.iso) / options.contrast;
+        return isoDistance(image, x, options.iso, 1e-12 / delta);
+    };
     const std::size_t faceCount = mesh.n_faces(), edgeCount = mesh.n_edges();
     faceNormalBuffer.resize(faceCount);
     Vec3* const faceNormal = faceNormalBuffer.data();
+    // With face samples, each face's centroid is sampled too (see ForceOptions::vertexShare).
+    const bool faceSamples = options.vertexShare < 1.0;
+    if (faceSamples) faceDistanceBuffer.resize(faceCount);
+    double* const faceDistance = faceDistanceBuffer.data();
     detail::parallelFor(0, faceCount, kGrain, [&](std::size_t fi) {
         const FaceHandle f{int(fi)};
         if (faceStatus && mesh.status(f).deleted()) return;
@@ -64,6 +73,7 @@ void computeForces(const Mesh& mesh, const ScalarImage& image, const ForceOption
                            c = mesh.to_vertex_handle(h1);
         const Vec3 pa = position(mesh, a), pb = position(mesh, b), pc = position(mesh, c);
         faceNormal[fi] = (pb - pa).cross(pc - pa);
+        if (faceSamples) faceDistance[fi] = distanceAt((pa + pb + pc) / 3.0);
     });
     // Each edge contributes each end to the other's umbrella, weighted by its metric stretch.
     if (riemannian) edgeWeightBuffer.resize(edgeCount);
@@ -92,34 +102,6 @@ void computeForces(const Mesh& mesh, const ScalarImage& image, const ForceOption
         }
     });
 
-    // Signed distance to the isosurface estimated at a point (world units, > 0 inside).
-    auto distanceAt = [&](const Vec3& x) {
-        double value;
-        if (options.contrast > 0) {
-            value = image.value(x);
-            return delta * (value - options.iso) / options.contrast;
-        }
-        Vec3 gradient;
-        image.sample(x, value, gradient);
-        return (value - options.iso) / std::max(gradient.norm(), 1e-12 / delta);
-    };
-    // With face samples, each face's centroid is sampled too (see ForceOptions::vertexShare).
-    static thread_local std::vector<double> faceDistanceBuffer;
-    const bool faceSamples = options.vertexShare < 1.0;
-    if (faceSamples) {
-        faceDistanceBuffer.resize(faceCount);
-        double* const fd = faceDistanceBuffer.data();
-        detail::parallelFor(0, faceCount, kGrain, [&](std::size_t fi) {
-            const FaceHandle f{int(fi)};
-            if (faceStatus && mesh.status(f).deleted()) return;
-            const auto h0 = mesh.halfedge_handle(f);
-            const auto h1 = mesh.next_halfedge_handle(h0);
-            const Vec3 centroid = (position(mesh, mesh.from_vertex_handle(h0)) + position(mesh, mesh.to_vertex_handle(h0)) +
-                                   position(mesh, mesh.to_vertex_handle(h1))) / 3.0;
-            fd[fi] = distanceAt(centroid);
-        });
-    }
-    const double* const faceDistance = faceDistanceBuffer.data();
     const double sign = options.objectBrighter ? 1.0 : -1.0;
     const double gradientStep = 0.5 * image.voxelSize();
     Vec3* const force = forces.data();

@@ -17,6 +17,14 @@
 
 namespace riemesh {
 
+double isoDistance(const ScalarImage& image, const Vec3& x, double iso, double minGradient)
+{
+    double value;
+    Vec3 gradient;
+    image.sample(x, value, gradient);
+    return (value - iso) / std::max(gradient.norm(), minGradient);
+}
+
 Vec3 ScalarImage::gradient(const Vec3& x) const
 {
     const double h = 0.5 * voxelSize();

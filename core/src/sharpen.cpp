@@ -130,11 +130,7 @@ SharpenStats sharpenFeatures(Mesh& mesh, const SharpenOptions& o)
             if (off.norm() > limit) y = start[i] + off * (limit / off.norm());
             if (o.image) { // back toward where the round started, while the image says far outside
                 auto outside = [&](const Vec3& p) {
-                    double value;
-                    Vec3 gradient;
-                    o.image->sample(p, value, gradient);
-                    const double d = (o.objectBrighter ? 1.0 : -1.0) * (value - o.iso) / std::max(gradient.norm(), 1e-12);
-                    return d < -o.maxOutside;
+                    return (o.objectBrighter ? 1.0 : -1.0) * isoDistance(*o.image, p, o.iso, 1e-12) < -o.maxOutside;
                 };
                 for (int k = 0; k < 4 && outside(y); ++k) y = x[i] + 0.5 * (y - x[i]);
                 if (outside(y)) y = x[i];

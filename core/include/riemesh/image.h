@@ -42,6 +42,11 @@ public:
     }
 };
 
+/// The Newton estimate of the signed distance from `x` to the isosurface I = iso: (I(x) - iso) /
+/// |grad I(x)| (world units, > 0 where the image is brighter), the gradient's norm taken at least
+/// `minGradient` (where the image is flat the estimate is large, not infinite).
+double isoDistance(const ScalarImage& image, const Vec3& x, double iso, double minGradient);
+
 /// An analytic image: I(x) = f(x), with an optional exact gradient.
 class FunctionImage final : public ScalarImage {
 public:
