@@ -4,6 +4,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <utility>
 #include <vector>
 
@@ -62,6 +63,14 @@ void computeForces(const Mesh& mesh, const ScalarImage& image, const ForceOption
     Vec3* const faceNormal = faceNormalBuffer.data();
     // With face samples, each face's centroid is sampled too (see ForceOptions::vertexShare).
     const bool faceSamples = options.vertexShare < 1.0;
+    // Samples are blended as the pull sees them, saturated: the Newton estimate runs to any size
+    // where the gradient is faint (a gyrus thinner than the blur, seen at iso 80), and one face's
+    // estimate of thousands of voxels would set the sign of the whole blend, flipping it from one
+    // iteration to the next as that face moved (the head MRI block at iso 80 jittered 0.8 voxel per
+    // iteration and never converged).
+    const double saturation = options.externalWeight > 0 ? options.externalLimit * delta / options.externalWeight
+                                                         : std::numeric_limits<double>::infinity();
+    auto saturated = [&](double d) { return std::max(-saturation, std::min(saturation, d)); };
     if (faceSamples) faceDistanceBuffer.resize(faceCount);
     double* const faceDistance = faceDistanceBuffer.data();
     detail::parallelFor(0, faceCount, kGrain, [&](std::size_t fi) {
@@ -73,7 +82,7 @@ void computeForces(const Mesh& mesh, const ScalarImage& image, const ForceOption
                            c = mesh.to_vertex_handle(h1);
         const Vec3 pa = position(mesh, a), pb = position(mesh, b), pc = position(mesh, c);
         faceNormal[fi] = (pb - pa).cross(pc - pa);
-        if (faceSamples) faceDistance[fi] = distanceAt((pa + pb + pc) / 3.0);
+        if (faceSamples) faceDistance[fi] = saturated(distanceAt((pa + pb + pc) / 3.0));
     });
     // Each edge contributes each end to the other's umbrella, weighted by its metric stretch.
     if (riemannian) edgeWeightBuffer.resize(edgeCount);
@@ -117,6 +126,7 @@ void computeForces(const Mesh& mesh, const ScalarImage& image, const ForceOption
         // isosurface is estimated as (I - iso)/|grad I| (a Newton step) unless a fixed contrast is given;
         // the pull is stiff near the surface and saturates at externalLimit * delta.
         double distance = distanceAt(x); // estimated signed distance to the isosurface (world units), > 0 inside
+        const double limit = options.externalLimit * delta;
         if (faceSamples) { // blended with its faces' (area-weighted, in the circulator's order)
             double sum = 0, area = 0;
             for (auto h = mesh.cvoh_begin(v); h.is_valid(); ++h) {
@@ -126,9 +136,8 @@ void computeForces(const Mesh& mesh, const ScalarImage& image, const ForceOption
                 sum += a * faceDistance[f.idx()];
                 area += a;
             }
-            if (area > 0) distance = options.vertexShare * distance + (1 - options.vertexShare) * sum / area;
+            if (area > 0) distance = options.vertexShare * saturated(distance) + (1 - options.vertexShare) * sum / area;
         }
-        const double limit = options.externalLimit * delta;
         const double push = std::max(-limit, std::min(limit, options.externalWeight * sign * distance));
         // How free the flight is: 0 on the isosurface, 1 where the push saturates.
         const double freedom = limit > 0 ? std::abs(push) / limit : 0.0;
