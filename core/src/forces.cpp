@@ -68,8 +68,8 @@ void computeForces(const Mesh& mesh, const ScalarImage& image, const ForceOption
     // estimate of thousands of voxels would set the sign of the whole blend, flipping it from one
     // iteration to the next as that face moved (the head MRI block at iso 80 jittered 0.8 voxel per
     // iteration and never converged).
-    const double saturation = options.externalWeight > 0 ? options.externalLimit * delta / options.externalWeight
-                                                         : std::numeric_limits<double>::infinity();
+    const double limit = options.externalLimit * delta; // the largest push
+    const double saturation = options.externalWeight > 0 ? limit / options.externalWeight : std::numeric_limits<double>::infinity();
     auto saturated = [&](double d) { return std::max(-saturation, std::min(saturation, d)); };
     if (faceSamples) faceDistanceBuffer.resize(faceCount);
     double* const faceDistance = faceDistanceBuffer.data();
@@ -126,7 +126,6 @@ void computeForces(const Mesh& mesh, const ScalarImage& image, const ForceOption
         // isosurface is estimated as (I - iso)/|grad I| (a Newton step) unless a fixed contrast is given;
         // the pull is stiff near the surface and saturates at externalLimit * delta.
         double distance = distanceAt(x); // estimated signed distance to the isosurface (world units), > 0 inside
-        const double limit = options.externalLimit * delta;
         if (faceSamples) { // blended with its faces' (area-weighted, in the circulator's order)
             double sum = 0, area = 0;
             for (auto h = mesh.cvoh_begin(v); h.is_valid(); ++h) {
