@@ -30,25 +30,24 @@ double metricLength(const MetricField& metric, const Mesh& mesh, EdgeHandle e)
     return metricLength(metric.at(u), metric.at(v), d);
 }
 
-VertexMetrics::VertexMetrics(const Mesh& mesh, const MetricField& metric) : mMesh(mesh), mMetric(metric)
+VertexMetrics::VertexMetrics(const Mesh& mesh, const MetricField& metric)
+    : mMesh(mesh), mMetric(metric), mEuclidean(metric.isEuclidean())
 {
-    if (!metric.isEuclidean()) mHasCache = mesh.get_property_handle(mCache, kMetricCacheProperty);
+    if (!mEuclidean) mHasCache = mesh.get_property_handle(mCache, kMetricCacheProperty);
 }
 
-VertexMetrics::VertexMetrics(Mesh& mesh, const MetricField& metric) : mMesh(mesh), mWritable(&mesh), mMetric(metric)
+VertexMetrics::VertexMetrics(Mesh& mesh, const MetricField& metric)
+    : mMesh(mesh), mWritable(&mesh), mMetric(metric), mEuclidean(metric.isEuclidean())
 {
-    if (metric.isEuclidean()) return;
+    if (mEuclidean) return;
     if (!mesh.get_property_handle(mCache, kMetricCacheProperty)) mesh.add_property(mCache, kMetricCacheProperty);
     mHasCache = true;
 }
 
-Mat3 VertexMetrics::at(VertexHandle v) const
+Mat3 VertexMetrics::sample(VertexHandle v) const
 {
-    if (mMetric.isEuclidean()) return Mat3::Identity();
     const Mesh::Point& p = mMesh.point(v);
-    if (!mHasCache) return mMetric.at(toVec3(p));
-    if (const VertexMetric& cached = mMesh.property(mCache, v); cached.at == p) return cached.g;
-    if (!mWritable) return mMetric.at(toVec3(p));
+    if (!mHasCache || !mWritable) return mMetric.at(toVec3(p));
     VertexMetric& entry = mWritable->property(mCache, v);
     entry.g = mMetric.at(toVec3(p));
     entry.at = p;
