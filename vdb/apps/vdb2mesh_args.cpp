@@ -57,7 +57,7 @@ void printVdb2MeshUsage(std::FILE* out)
         "                       level about 16 edges across the image; 0 = the image only\n"
         "  --intersection-free  no iteration may make faces cross: continuous collision detection of\n"
         "                       every step, collapses, flips and cuts refused where faces would cross\n"
-        "                       (off by default: the evolution then takes about 1.8x as long; a\n"
+        "                       (off by default: the evolution then takes about 2x as long; a\n"
         "                       surface that crosses itself without it is evolved again with it)\n"
         "  --sharpen            put creases and corners back on the converged surface (filtered\n"
         "                       face normals, vertices fitted to them, at most 2.5 voxels): for shapes\n"
