@@ -370,6 +370,7 @@ TEST_CASE("vdb2mesh: a noisy ball phantom becomes one closed genus-0 mesh close 
     CHECK(json.find("\"genus\": 0") != std::string::npos);
     CHECK(json.find("\"self_intersections\": 0,") != std::string::npos);
     CHECK(json.find("\"hausdorff_voxels\"") != std::string::npos);
+    CHECK(json.find("\"hausdorff_at\": [") != std::string::npos);
     {
         openvdb::io::File metric(f.path("metric.vdb"));
         metric.open();

@@ -532,6 +532,22 @@ TEST_CASE("accuracy: the two-sided measure sees rounded edges and corners of a b
     const SurfaceError exact = surfaceError(box, *p.sdf, exactDistance);
     CHECK(exact.hausdorff < 0.05);
     CHECK(exact.meanSurfaceToMesh < 0.01);
+    {
+        // One vertex of the top face lifted by 2 voxels: the Hausdorff is there, on the mesh.
+        riemesh::Mesh lifted = box;
+        const riemesh::Vec3 target(c + 5, c - 3, hi.z());
+        riemesh::VertexHandle best;
+        for (auto v : lifted.vertices())
+            if (!best.is_valid() || (riemesh::position(lifted, v) - target).norm() <
+                                        (riemesh::position(lifted, best) - target).norm())
+                best = v;
+        const riemesh::Vec3 top = riemesh::position(lifted, best) + riemesh::Vec3(0, 0, 2);
+        lifted.set_point(best, riemesh::toPoint(top));
+        const SurfaceError l = surfaceError(lifted, *p.sdf, exactDistance);
+        CHECK(l.hausdorff == doctest::Approx(2.0).epsilon(0.01));
+        CHECK(l.hausdorffOnMesh);
+        CHECK((riemesh::Vec3(l.hausdorffAt.x(), l.hausdorffAt.y(), l.hausdorffAt.z()) - top).norm() < 0.01);
+    }
     const double r = 1.5;
     for (auto v : box.vertices()) {
         const riemesh::Vec3 q = riemesh::position(box, v);
@@ -544,6 +560,15 @@ TEST_CASE("accuracy: the two-sided measure sees rounded edges and corners of a b
     CHECK(e.maxMeshToSurface == doctest::Approx(r * (1 - 1 / std::sqrt(3.0))).epsilon(0.1));
     CHECK(e.maxSurfaceToMesh == doctest::Approx(r * (std::sqrt(3.0) - 1)).epsilon(0.05));
     CHECK(e.hausdorff == e.maxSurfaceToMesh);
+    // ... and it is at one of the true corners, on the reference surface.
+    CHECK_FALSE(e.hausdorffOnMesh);
+    double nearestCorner = 1e300;
+    for (int k = 0; k < 8; ++k) {
+        const riemesh::Vec3 corner((k & 1) ? hi.x() : lo.x(), (k & 2) ? hi.y() : lo.y(), (k & 4) ? hi.z() : lo.z());
+        nearestCorner = std::min(
+            nearestCorner, (riemesh::Vec3(e.hausdorffAt.x(), e.hausdorffAt.y(), e.hausdorffAt.z()) - corner).norm());
+    }
+    CHECK(nearestCorner < 0.3);
     // Interpolating the grid instead rounds the true corners too (trilinear between voxel centres):
     // it sees the edges' 0.62 but not the corners' 1.10; hence the analytic distance for phantoms.
     const SurfaceError g = surfaceError(box, *p.sdf);

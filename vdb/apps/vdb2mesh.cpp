@@ -285,10 +285,11 @@ int main(int argc, char** argv)
                         result.seconds.metric, evo.seconds);
             if (ref)
                 std::printf("; vs reference (voxels): mesh->surface mean %.3f max %.3f, surface->mesh mean %.3f "
-                            "max %.3f, Hausdorff %.3f",
+                            "max %.3f, Hausdorff %.3f (%s, at %.4g %.4g %.4g)",
                             ref->meanMeshToSurface / ref->voxelSize, ref->maxMeshToSurface / ref->voxelSize,
                             ref->meanSurfaceToMesh / ref->voxelSize, ref->maxSurfaceToMesh / ref->voxelSize,
-                            ref->hausdorff / ref->voxelSize);
+                            ref->hausdorff / ref->voxelSize, ref->hausdorffOnMesh ? "a mesh point" : "a reference point",
+                            ref->hausdorffAt[0], ref->hausdorffAt[1], ref->hausdorffAt[2]);
             std::printf("\n");
             if (evo.untangledAt > 0)
                 std::printf("note: after iteration %d the surface %s; it was evolved again from the start with "

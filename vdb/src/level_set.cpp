@@ -221,6 +221,7 @@ SurfaceError surfaceError(const std::vector<Vec3d>& worldPoints, const std::vect
     // Mesh -> surface: about 4 samples per square voxel on every triangle, area-weighted.
     {
         std::vector<double> sum(triangles.size(), 0.0), worst(triangles.size(), 0.0);
+        std::vector<Vec3d> worstAt(triangles.size(), Vec3d(0.0));
         std::vector<std::size_t> count(triangles.size(), 0);
         tbb::parallel_for(tbb::blocked_range<std::size_t>(0, triangles.size(), 256), [&](const auto& range) {
             const auto d = distance();
@@ -229,15 +230,17 @@ SurfaceError surfaceError(const std::vector<Vec3d>& worldPoints, const std::vect
                 const double longest = std::max({(b - a).length(), (c - b).length(), (a - c).length()});
                 const int n = std::clamp(int(std::ceil(longest / (0.5 * h))), 1, 256);
                 double s = 0, m = 0;
+                Vec3d at = a;
                 std::size_t k = 0;
                 for (int i = 0; i <= n; ++i)
                     for (int j = 0; i + j <= n; ++j) {
                         const Vec3d p = a + (b - a) * (double(i) / n) + (c - a) * (double(j) / n);
                         const double e = std::min(std::abs(d(p)), cap);
                         s += e;
-                        m = std::max(m, e);
+                        if (e > m) m = e, at = p;
                         ++k;
                     }
+                worstAt[t] = at;
                 const double area = 0.5 * (b - a).cross(c - a).length();
                 sum[t] = area * s / double(k);
                 worst[t] = m;
@@ -249,7 +252,11 @@ SurfaceError surfaceError(const std::vector<Vec3d>& worldPoints, const std::vect
             const Vec3d a = worldPoints[triangles[t][0]], b = worldPoints[triangles[t][1]], c = worldPoints[triangles[t][2]];
             area += 0.5 * (b - a).cross(c - a).length();
             total += sum[t];
-            err.maxMeshToSurface = std::max(err.maxMeshToSurface, worst[t]);
+            if (worst[t] > err.maxMeshToSurface || t == 0) {
+                err.maxMeshToSurface = worst[t];
+                err.hausdorffAt = worstAt[t];
+                err.hausdorffOnMesh = true;
+            }
             err.meshSamples += count[t];
         }
         err.meanMeshToSurface = area > 0 ? total / area : 0.0;
@@ -321,9 +328,15 @@ SurfaceError surfaceError(const std::vector<Vec3d>& worldPoints, const std::vect
                 for (std::size_t i = range.begin(); i != range.end(); ++i) dist[i] = grid.distance(samples[i], cap);
             });
         double total = 0;
-        for (double e : dist) {
-            total += e;
-            err.maxSurfaceToMesh = std::max(err.maxSurfaceToMesh, e);
+        std::size_t farthest = 0;
+        for (std::size_t i = 0; i < dist.size(); ++i) {
+            total += dist[i];
+            if (dist[i] > dist[farthest]) farthest = i;
+        }
+        if (!dist.empty()) err.maxSurfaceToMesh = dist[farthest];
+        if (!dist.empty() && (err.maxSurfaceToMesh > err.maxMeshToSurface || triangles.empty())) {
+            err.hausdorffAt = samples[farthest];
+            err.hausdorffOnMesh = false;
         }
         err.surfaceSamples = samples.size();
         err.meanSurfaceToMesh = samples.empty() ? 0.0 : total / double(samples.size());

@@ -475,7 +475,9 @@ std::string pipelineStatsJson(const PipelineResult& r, const PipelineRecord& rec
                           {"mean_surface_to_mesh_voxels", ref.meanSurfaceToMesh / ref.voxelSize},
                           {"max_surface_to_mesh_voxels", ref.maxSurfaceToMesh / ref.voxelSize},
                           {"analytic", ref.analytic},
-                          {"hausdorff_voxels", ref.hausdorff / ref.voxelSize}};
+                          {"hausdorff_voxels", ref.hausdorff / ref.voxelSize},
+                          {"hausdorff_at", {ref.hausdorffAt[0], ref.hausdorffAt[1], ref.hausdorffAt[2]}},
+                          {"hausdorff_on", ref.hausdorffOnMesh ? "mesh" : "reference"}};
     }
     // One line per section and per iteration, as vdb2mesh has always written it.
     std::string out = "{";

@@ -458,6 +458,8 @@ ReferenceError compareToReference(const Mesh& mesh, const std::string& path, con
     r.meanSurfaceToMesh = e.meanSurfaceToMesh;
     r.maxSurfaceToMesh = e.maxSurfaceToMesh;
     r.hausdorff = e.hausdorff;
+    for (int k = 0; k < 3; ++k) r.hausdorffAt[k] = e.hausdorffAt[k];
+    r.hausdorffOnMesh = e.hausdorffOnMesh;
     r.analytic = bool(exact);
     r.voxelSize = sdf->transform().voxelSize()[0];
     return r;

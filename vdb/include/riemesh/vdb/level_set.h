@@ -45,6 +45,10 @@ struct SurfaceError {
     double meanSurfaceToMesh = 0;  ///< mean over the reference surface's samples
     double maxSurfaceToMesh = 0;
     double hausdorff = 0;          ///< max of the two one-sided maxima
+    /// Where the Hausdorff distance is (world): the mesh's sample farthest from the surface, or
+    /// the surface's sample farthest from the mesh, whichever is farther (hausdorffOnMesh).
+    openvdb::Vec3d hausdorffAt{0.0};
+    bool hausdorffOnMesh = false;
     std::size_t meshSamples = 0, surfaceSamples = 0;
 };
 /// `sdf` seeds the surface samples (its voxels with |value| < 1 voxel) and gives the distance unless

@@ -128,6 +128,10 @@ struct ReferenceError {
     double meanMeshToSurface = 0, maxMeshToSurface = 0; ///< mesh samples to the reference surface
     double meanSurfaceToMesh = 0, maxSurfaceToMesh = 0; ///< reference surface samples to the mesh
     double hausdorff = 0, voxelSize = 1;
+    /// Where the Hausdorff distance is (world units, as the mesh's points): on the mesh (the sample
+    /// farthest from the reference surface) or on the reference surface (the farthest from the mesh).
+    double hausdorffAt[3] = {0, 0, 0};
+    bool hausdorffOnMesh = false;
     bool analytic = false; ///< measured against a phantom's analytic distance (else the grid's, trilinear)
 };
 ReferenceError compareToReference(const Mesh& mesh, const std::string& path, const std::string& gridName = "sdf");
