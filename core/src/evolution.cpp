@@ -162,6 +162,8 @@ void validate(const EvolutionOptions& o)
     if (!(o.mass > 0) || !(o.damping >= 0)) throw std::invalid_argument("evolution: mass must be > 0 and damping >= 0");
     if (o.maxIterations < 0 || o.convergenceWindow < 1) throw std::invalid_argument("evolution: bad iteration limits");
     if (o.tangleCheckFirst < 1) throw std::invalid_argument("evolution: tangleCheckFirst must be >= 1");
+    if (!(o.coarseMetricReach >= 0) || !std::isfinite(o.coarseMetricReach))
+        throw std::invalid_argument("evolution: coarseMetricReach must be finite and >= 0");
 }
 
 } // namespace
@@ -182,6 +184,13 @@ Evolution::Evolution(Mesh& mesh, std::vector<EvolutionLevel> levels, const Metri
     if (mOptions.coarseConvergenceWindow < 1 || mOptions.coarseMaxIterations < 1)
         throw std::invalid_argument("evolution: bad coarse-level limits");
     prepareMesh(mMesh);
+    // The coarse levels' metric reaches out to their surfaces (see coarseMetricReach).
+    mLevelMetrics.resize(mLevels.size());
+    if (mOptions.coarseMetricReach > 0 && !mMetric.isEuclidean())
+        for (std::size_t l = 0; l + 1 < mLevels.size(); ++l)
+            if (mLevels[l].scale > 1)
+                mLevelMetrics[l] = std::make_unique<DilatedMetric>(
+                    mMetric, mOptions.coarseMetricReach * mLevels[l].image->voxelSize());
     if (mLevels.size() > 1) mInitialMesh = mMesh;
     if (untangling()) mUntangleMesh = mMesh;
     mChurn = mMesh.n_vertices(); // a given mesh's numbering is unknown: renumbered at the first step
@@ -200,6 +209,21 @@ void Evolution::setOptions(const EvolutionOptions& options)
     mOptions = options;
     if (mReason == StopReason::Converged || mReason == StopReason::IterationCap) mReason = StopReason::Running;
     mLastTopologyEvent = int(mHistory.size());
+}
+
+namespace {
+/// Marks every vertex's cached G stale (VertexMetrics): the metric field changed.
+void forgetMetricSamples(Mesh& mesh)
+{
+    OpenMesh::VPropHandleT<VertexMetric> cache;
+    if (!mesh.get_property_handle(cache, kMetricCacheProperty)) return;
+    for (auto v : mesh.vertices()) mesh.property(cache, v).at = Mesh::Point(std::nan(""), std::nan(""), std::nan(""));
+}
+} // namespace
+
+const MetricField& Evolution::levelMetric() const
+{
+    return mLevelMetrics[std::size_t(mLevel)] ? *mLevelMetrics[std::size_t(mLevel)] : mMetric;
 }
 
 EvolutionOptions Evolution::levelOptions() const
@@ -226,7 +250,8 @@ IterationStats Evolution::step()
 
     // G at every vertex once per position: the samples taken after the last integration serve the
     // regularity step and now the forces (only vertices created or moved since are sampled here).
-    VertexMetrics vertexMetrics(mMesh, mMetric);
+    const MetricField& metric = levelMetric();
+    VertexMetrics vertexMetrics(mMesh, metric);
     vertexMetrics.update();
     // Free flight runs at the terminal speed externalLimit delta / damping. A convex crease of the
     // front (a deflating box's edges) travels along its bisector, sqrt 2 times as far as the
@@ -235,7 +260,7 @@ IterationStats Evolution::step()
     // the faces would fly faster than vmax / sqrt 2 (never with the defaults: 0.25 vs 0.35 delta).
     ForceOptions forces = o.forces;
     if (o.damping > 0) forces.externalLimit = std::min(forces.externalLimit, kCreaseRoom * o.damping * vmax / o.delta);
-    computeForces(mMesh, image, forces, o.delta, mForces, &mMetric);
+    computeForces(mMesh, image, forces, o.delta, mForces, &metric);
     phase(it.phases.forces);
     IntegrationOptions io;
     io.mass = o.mass;
@@ -272,7 +297,7 @@ IterationStats Evolution::step()
         ro.delta = c * o.delta;
         ro.zeta = o.zeta / c;
     }
-    RegularityStats rs = enforceRegularity(mMesh, mMetric, ro);
+    RegularityStats rs = enforceRegularity(mMesh, metric, ro);
     keepObjectNecks(mMesh, image, o.forces, rs.tunnels);
     vertexMetrics.update(); // the vertices the edits made or moved: for the collision search, and the next step
     phase(it.phases.regularity);
@@ -282,14 +307,14 @@ IterationStats Evolution::step()
     co.zeta = o.zeta;
     co.vmax = vmax;
     std::vector<CollisionPair> contacts;
-    auto collisions = findCollisions(mMesh, mMetric, co, &contacts);
+    auto collisions = findCollisions(mMesh, metric, co, &contacts);
     keepSettledPairsApart(mMesh, image, o.forces, collisions, contacts);
     phase(it.phases.collisions);
     TopologyStats ts;
     holdTopology(collisions, contacts);
     if (!collisions.empty() || !rs.tunnels.empty()) {
         TopologyOptions to;
-        to.neighbourhoodRadius = co.neighbourhoodFactor * collisionRadius(mMetric, co);
+        to.neighbourhoodRadius = co.neighbourhoodFactor * collisionRadius(metric, co);
         to.minSeparation = editSeparation;
         ts = resolveTopology(mMesh, collisions, rs.tunnels, to);
     }
@@ -471,18 +496,20 @@ void Evolution::updateConvergence()
     // are too coarse for the image. Start again from the initial surface without them.
     if (smallestComponent(mMesh) <= kCollapsedComponent) {
         mLevels.erase(mLevels.begin(), mLevels.begin() + mLevel + 1);
+        mLevelMetrics.erase(mLevelMetrics.begin(), mLevelMetrics.begin() + mLevel + 1);
         restartFrom(mInitialMesh, total);
         if (mLevels.size() == 1) mInitialMesh = Mesh();
         ++mRestarts;
         return;
     }
-    // A coarse level has arrived once no more than kStragglers vertices travel (a front filling a
-    // cavity through a hole is a handful of vertices, which travel faster here than they would on
-    // the finer levels; one or two drifting vertices are not a front).
-    constexpr std::size_t kStragglers = 2;
+    // A coarse level has arrived once no vertex travels. A front filling a cavity through a hole is
+    // a handful of vertices, which travel faster here than they would on the finer levels: the tip
+    // of the tube going down the phantom's hole at 400^3 is one or two of them (letting two travel
+    // ended level 2 there with the tube a third of the way down, and level 1 then took 141
+    // iterations to fill the cavity; now level 2 fills it, in 86).
     const int w = o.coarseConvergenceWindow;
     bool arrived = inLevel >= w;
-    for (int i = total - w; arrived && i < total; ++i) arrived = mHistory[i].moving <= kStragglers;
+    for (int i = total - w; arrived && i < total; ++i) arrived = mHistory[i].moving == 0;
     if (arrived || inLevel >= o.coarseMaxIterations) {
         const double scale = mLevels[mLevel].scale / mLevels.back().scale;
         mPredictedVertices = std::size_t(double(mHistory[total - 1].vertices) * scale * scale);
@@ -491,6 +518,7 @@ void Evolution::updateConvergence()
             return;
         }
         ++mLevel; // the next, finer level starts from this surface
+        if (mLevelMetrics[std::size_t(mLevel - 1)] || mLevelMetrics[std::size_t(mLevel)]) forgetMetricSamples(mMesh);
         mSafeStepCache.invalidate(); // (a new delta: new clearances)
         mLevelStart = total;
     }
@@ -530,6 +558,7 @@ void Evolution::checkTangle()
 void Evolution::restartFrom(const Mesh& initial, int total)
 {
     mMesh = initial;
+    forgetMetricSamples(mMesh); // (sampled in another level's metric, if any)
     mSafeStepCache.invalidate();
     mLevel = 0;
     mLevelStart = total;

@@ -93,6 +93,26 @@ FunctionMetric::FunctionMetric(std::function<Mat3(const Vec3&)> g, double maxEig
     if (!(maxEigenvalue >= 1.0)) throw std::invalid_argument("FunctionMetric: maxEigenvalue must be >= 1");
 }
 
+DilatedMetric::DilatedMetric(const MetricField& base, double radius) : mBase(base), mRadius(radius)
+{
+    if (!(radius >= 0) || !std::isfinite(radius)) throw std::invalid_argument("DilatedMetric: radius must be finite and >= 0");
+}
+
+Mat3 DilatedMetric::at(const Vec3& x) const
+{
+    Mat3 best = mBase.at(x);
+    if (mRadius == 0) return best;
+    double trace = best.trace();
+    for (int axis = 0; axis < 3; ++axis)
+        for (const double side : {-1.0, 1.0}) {
+            Vec3 y = x;
+            y[axis] += side * mRadius;
+            const Mat3 g = mBase.at(y);
+            if (g.trace() > trace) best = g, trace = g.trace();
+        }
+    return best;
+}
+
 Mat3 metricFromEigen(const Mat3& basis, const Vec3& eigenvalues)
 {
     return basis * eigenvalues.asDiagonal() * basis.transpose();

@@ -4,6 +4,7 @@
 
 #include <doctest/doctest.h>
 
+#include <cmath>
 #include <stdexcept>
 
 using namespace riemesh;
@@ -35,6 +36,34 @@ TEST_CASE("metric: a function metric is evaluated at the edge midpoint")
     FunctionMetric m([](const Vec3& x) { return x.x() > 0 ? Mat3(Mat3::Identity() * 4.0) : Mat3(Mat3::Identity()); }, 4.0);
     CHECK(metricLength(m, Vec3(-1, 0, 0), Vec3(-0.5, 0, 0)) == doctest::Approx(0.5));
     CHECK(metricLength(m, Vec3(0.5, 0, 0), Vec3(1, 0, 0)) == doctest::Approx(1.0));
+}
+
+TEST_CASE("metric: a dilated metric takes the largest of the samples within its radius along the axes")
+{
+    // A refined slab |z - 5| < 1 (mu 9 across it) in a Euclidean space.
+    const FunctionMetric slab(
+        [](const Vec3& x) {
+            Mat3 g = Mat3::Identity();
+            if (std::abs(x.z() - 5) < 1) g(2, 2) = 9;
+            return g;
+        },
+        9.0);
+    const DilatedMetric reach(slab, 3.0), none(slab, 0.0);
+    CHECK(reach.maxEigenvalue() == 9.0);
+    CHECK_FALSE(reach.isEuclidean());
+    CHECK(reach.at(Vec3(0, 0, 8.5))(2, 2) == 9.0); // 3 below is in the slab
+    CHECK(reach.at(Vec3(0, 0, 1.5))(2, 2) == 9.0); // 3 above
+    CHECK(reach.at(Vec3(0, 0, 9.5))(2, 2) == 1.0); // out of reach
+    CHECK(reach.at(Vec3(0, 0, 0.5))(2, 2) == 1.0);
+    CHECK(reach.at(Vec3(7, -2, 5))(2, 2) == 9.0); // in it
+    CHECK(none.at(Vec3(0, 0, 8.5))(2, 2) == 1.0); // radius 0: the metric itself
+    // Lengths never shrink: the chosen sample has the largest trace, and each is SPD with
+    // eigenvalues in [1, 9].
+    CHECK(metricLength(reach, Vec3(0, 0, 7), Vec3(0, 0, 8)) == doctest::Approx(3.0));
+    CHECK_THROWS_AS(DilatedMetric(slab, -1.0), std::invalid_argument);
+    const EuclideanMetric euclidean;
+    const DilatedMetric flat(euclidean, 2.0);
+    CHECK(flat.isEuclidean());
 }
 
 TEST_CASE("metric: built from an eigenbasis it has those eigenvalues")

@@ -129,6 +129,24 @@ private:
     double mMax;
 };
 
+/// G of `base` reaching `radius` (world units) around each point: at x, the sample with the largest
+/// trace among x and x +- radius along each axis (7 samples). For a coarse level of a
+/// coarse-to-fine schedule, whose object is grown by about half a block: its surface settles that
+/// far outside the contours, where the metric of the image (refined within a few voxels of them)
+/// is already the identity, so without this a coarse level samples a narrow hole, an edge or a
+/// corner as coarsely as a flat face. `base` must outlive this object.
+class DilatedMetric final : public MetricField {
+public:
+    DilatedMetric(const MetricField& base, double radius);
+    Mat3 at(const Vec3& x) const override;
+    double maxEigenvalue() const override { return mBase.maxEigenvalue(); }
+    bool isEuclidean() const override { return mBase.isEuclidean(); }
+
+private:
+    const MetricField& mBase;
+    double mRadius;
+};
+
 /// G read from two NanoVDB Vec3f grids, trilinearly interpolated: `diag` = (gxx, gyy, gzz) with
 /// background (1,1,1) and `off` = (gxy, gxz, gyz) with background (0,0,0) (identity where inactive).
 /// The grids are not owned: keep their GridHandles alive as long as this object. Thread-safe: each
