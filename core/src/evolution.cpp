@@ -211,16 +211,6 @@ void Evolution::setOptions(const EvolutionOptions& options)
     mLastTopologyEvent = int(mHistory.size());
 }
 
-namespace {
-/// Marks every vertex's cached G stale (VertexMetrics): the metric field changed.
-void forgetMetricSamples(Mesh& mesh)
-{
-    OpenMesh::VPropHandleT<VertexMetric> cache;
-    if (!mesh.get_property_handle(cache, kMetricCacheProperty)) return;
-    for (auto v : mesh.vertices()) mesh.property(cache, v).at = Mesh::Point(std::nan(""), std::nan(""), std::nan(""));
-}
-} // namespace
-
 const MetricField& Evolution::levelMetric() const
 {
     return mLevelMetrics[std::size_t(mLevel)] ? *mLevelMetrics[std::size_t(mLevel)] : mMetric;
@@ -518,7 +508,7 @@ void Evolution::updateConvergence()
             return;
         }
         ++mLevel; // the next, finer level starts from this surface
-        if (mLevelMetrics[std::size_t(mLevel - 1)] || mLevelMetrics[std::size_t(mLevel)]) forgetMetricSamples(mMesh);
+        if (mLevelMetrics[std::size_t(mLevel - 1)] || mLevelMetrics[std::size_t(mLevel)]) VertexMetrics::forget(mMesh);
         mSafeStepCache.invalidate(); // (a new delta: new clearances)
         mLevelStart = total;
     }
@@ -558,7 +548,7 @@ void Evolution::checkTangle()
 void Evolution::restartFrom(const Mesh& initial, int total)
 {
     mMesh = initial;
-    forgetMetricSamples(mMesh); // (sampled in another level's metric, if any)
+    VertexMetrics::forget(mMesh); // (sampled in another level's metric, if any)
     mSafeStepCache.invalidate();
     mLevel = 0;
     mLevelStart = total;

@@ -44,6 +44,13 @@ VertexMetrics::VertexMetrics(Mesh& mesh, const MetricField& metric)
     mHasCache = true;
 }
 
+void VertexMetrics::forget(Mesh& mesh)
+{
+    OpenMesh::VPropHandleT<VertexMetric> cache;
+    if (!mesh.get_property_handle(cache, kMetricCacheProperty)) return;
+    for (auto v : mesh.vertices()) mesh.property(cache, v).at = VertexMetric{}.at;
+}
+
 Mat3 VertexMetrics::sample(VertexHandle v) const
 {
     const Mesh::Point& p = mMesh.point(v);
@@ -108,7 +115,7 @@ Mat3 DilatedMetric::at(const Vec3& x) const
             Vec3 y = x;
             y[axis] += side * mRadius;
             const Mat3 g = mBase.at(y);
-            if (g.trace() > trace) best = g, trace = g.trace();
+            if (const double t = g.trace(); t > trace) best = g, trace = t;
         }
     return best;
 }

@@ -84,6 +84,9 @@ public:
     }
     /// Samples every vertex whose entry is not current; returns how many were sampled.
     std::size_t update();
+    /// Marks every entry of `mesh`'s cache stale (the metric field changed: a coarse level's
+    /// DilatedMetric and the image's are different fields at the same positions).
+    static void forget(Mesh& mesh);
 
     const MetricField& field() const { return mMetric; }
 
