@@ -163,11 +163,10 @@ class Bench:
 
 
 # ---- small helpers -------------------------------------------------------------------------------
-# Issue 16's side by side: riemesh's options that are off by default (name, flags, file suffix), and
-# every method of its tables in order.
-SHARP_VARIANTS = [("riemesh --sharpen", ["--sharpen"], "S"),
-                  ("riemesh --face-samples", ["--face-samples"], "F"),
-                  ("riemesh --face-samples --sharpen", ["--face-samples", "--sharpen"], "FS")]
+# Issue 16's side by side: riemesh without its sharpening (on by default) and with its option that is
+# off by default (name, flags, file suffix), and every method of its tables in order.
+SHARP_VARIANTS = [("riemesh --no-sharpen", ["--no-sharpen"], "N"),
+                  ("riemesh --face-samples", ["--face-samples"], "F")]
 SHARP_METHODS = ("riemesh",) + tuple(v[0] for v in SHARP_VARIANTS) + ("volumeToMesh", "CGAL Mesh_3")
 
 def parse_csv(text):
@@ -639,10 +638,10 @@ class Report:
                      "mesh measured by the same code (vdb/level_set.h `surfaceError`, as `vdb2mesh --reference`: "
                      "mesh->true mean over ~4 samples per square voxel of the mesh, true->mesh mean from samples of the "
                      "true surface, its edges and corners included, Hausdorff = the larger of the two maxima; voxels). "
-                     "**riemesh**: `vdb2mesh` defaults; **riemesh --sharpen**: the same with `--sharpen` (creases and "
-                     "corners put back on the converged surface, off by default); **riemesh --face-samples**: with "
-                     "`--face-samples` (the image force sampled at the faces' centres as well as at the vertices, off "
-                     "by default), and with both. **volumeToMesh**: `vdb_bench mesh` after OpenVDB's "
+                     "**riemesh**: `vdb2mesh` defaults (creases and corners put back on the converged surface where "
+                     "the filtered face normals and the image both show one); **riemesh --no-sharpen**: the same "
+                     "without that; **riemesh --face-samples**: with `--face-samples` (the image force sampled at the "
+                     "faces' centres as well as at the vertices, off by default). **volumeToMesh**: `vdb_bench mesh` after OpenVDB's "
                      "`tools::Filter::gaussian` (width:iterations) %s, adaptivities %s; its best setting over all of them by the peers "
                      "section's rule (the fewest vertices among settings at most as far from the surface, mesh->true, "
                      "as riemesh; else the most accurate). **CGAL Mesh_3**: `cgal_bench` (CGAL %s, "
@@ -679,8 +678,8 @@ class Report:
                         seconds=(r["seconds"] - r.get("read_seconds", 0.0) - r.get("write_seconds", 0.0))
                         if ok(r) else None)
             rows.append(rrow)
-            # The same with the options that are off by default: --sharpen (creases and corners put back),
-            # --face-samples (the image force sampled at the faces' centres too), and both.
+            # The same without the sharpening (--no-sharpen), and with the option that is off by default
+            # (--face-samples: the image force sampled at the faces' centres too).
             for method, flags, suffix in SHARP_VARIANTS:
                 rs = b.vdb2mesh("sharp_%s_%s" % (tag, suffix), img, flags, self.timeout)
                 rows.append(dict(image=label, method=method, setting="vdb2mesh " + " ".join(flags),

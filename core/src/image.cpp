@@ -120,6 +120,14 @@ void NanoImage::sample(const Vec3& x, double& value, Vec3& gradient) const
     gradient = Vec3(w[0], w[1], w[2]);
 }
 
+Vec3 NanoImage::indexGradient(const Vec3& x) const
+{
+    detail::Stencil<float> st;
+    detail::fetchStencil(detail::threadAccessor<0>(mOwner, mGrid), mGrid->worldToIndex(nanovdb::Vec3d(x.x(), x.y(), x.z())), st);
+    const nanovdb::Vec3d g = detail::trilinearGradient(st);
+    return Vec3(g[0], g[1], g[2]);
+}
+
 // ---- NanoVolume -------------------------------------------------------------------------------
 
 NanoVolume::NanoVolume() = default;

@@ -84,8 +84,10 @@ SharpenStats sharpenFeatures(Mesh& mesh, const SharpenOptions& o)
 
     FaceGeometry geo;
     const double s2 = 2.0 * meanEdge * meanEdge, r2 = 2.0 * o.sigmaNormal * o.sigmaNormal;
+    auto cosOf = [](double degrees) { return degrees > 0 ? std::cos(degrees * 3.14159265358979323846 / 180.0) : 1.0; };
+    const double featureCos = cosOf(o.featureAngle), imageCos = cosOf(o.imageFeatureAngle);
     std::vector<Vec3> filtered, next(nf), moved(nv);
-    std::vector<char> keep(nv);
+    std::vector<char> keep(nv), feature(nv);
     for (int round = 0; round < o.rounds; ++round) {
         measureFaces(mesh, x, geo);
         filtered = geo.normal;
@@ -104,12 +106,46 @@ SharpenStats sharpenFeatures(Mesh& mesh, const SharpenOptions& o)
             std::swap(filtered, next);
         }
 
-        // Each vertex to the point nearest the planes of its faces (filtered normal, through the
+        // The vertices on a crease or a corner: at an edge of theirs, the filtered normals of the
+        // two faces differ by more than the feature angle, and so do the image's own normals on
+        // either side (SharpenOptions::featureAngle, imageFeatureAngle).
+        const bool gated = featureCos < 1 || (o.image && imageCos < 1);
+        feature.assign(nv, gated ? 0 : 1);
+        auto imageNormal = [&](const Vec3& q) {
+            const Vec3 g = o.image->indexGradient(q);
+            const double len = g.norm();
+            return len > 0 ? Vec3(g / len) : Vec3::Zero();
+        };
+        auto crease = [&](HalfedgeHandle h) {
+            const FaceHandle f = mesh.face_handle(h), g = mesh.face_handle(mesh.opposite_halfedge_handle(h));
+            if (!f.is_valid() || !g.is_valid()) return false;
+            const std::size_t a = std::size_t(f.idx()), b = std::size_t(g.idx());
+            if (filtered[a].dot(filtered[b]) > featureCos) return false;
+            if (!o.image) return true;
+            // The image's normals a little way into each face from the edge's midpoint.
+            const Vec3 m = 0.5 * (x[std::size_t(mesh.from_vertex_handle(h).idx())] + x[std::size_t(mesh.to_vertex_handle(h).idx())]);
+            const Vec3 ta = geo.centroid[a] - m, tb = geo.centroid[b] - m;
+            if (!(ta.norm() > 0) || !(tb.norm() > 0)) return false;
+            const double step = o.imageStep * o.image->voxelSize();
+            return imageNormal(m + step * ta.normalized()).dot(imageNormal(m + step * tb.normalized())) <= imageCos;
+        };
+        if (gated)
+            for (auto v : mesh.vertices())
+                for (auto h : mesh.voh_range(v))
+                    if (crease(h)) {
+                        feature[std::size_t(v.idx())] = 1;
+                        break;
+                    }
+        // Each of those to the point nearest the planes of its faces (filtered normal, through the
         // face's centroid), with a weak pull to where it is: along a crease only that pull holds
-        // it, on a flat part it moves along the normal only. The planes stay put during a round
+        // it. The planes stay put during a round
         // (updates through moving centroids would shrink curved parts as Laplacian smoothing does).
         for (auto v : mesh.vertices()) {
             const std::size_t i = std::size_t(v.idx());
+            if (!feature[i]) { // left where the evolution put it
+                moved[i] = x[i];
+                continue;
+            }
             Eigen::Matrix3d A = Eigen::Matrix3d::Zero();
             Vec3 rhs = Vec3::Zero();
             int count = 0;

@@ -451,7 +451,7 @@ writes it: name is one of phantom_shapes(); grid 'density' (a fog volume with ad
           py::arg("smooth") = py::none(), py::arg("max_iterations") = vdb::kMaxIterations,
           py::arg("max_vertices") = vdb::kMaxVertices, py::arg("init") = "box", py::arg("open_borders") = false,
           py::arg("downsample") = 1, py::arg("levels") = -1, py::arg("threads") = 0, py::arg("max_memory") = 0,
-          py::arg("intersection_free") = false, py::arg("sharpen") = false, py::arg("face_samples") = false, py::arg("progress") = py::none(),
+          py::arg("intersection_free") = false, py::arg("sharpen") = true, py::arg("face_samples") = false, py::arg("progress") = py::none(),
           R"doc(Meshes the isosurface `iso` of `volume` with the adaptive deformable model; returns a riemesh.Mesh.
 
 volume: a 3D numpy array (or anything numpy.asarray takes) indexed [i, j, k] as in scikit-image, its
@@ -467,7 +467,7 @@ The other options are vdb2mesh's flags, with the same defaults and units: metric
   world units, 'mesh:FILE'), open_borders, downsample, levels (-1: automatic), threads,
   max_memory (bytes), intersection_free (no iteration may make faces cross; off by default: it costs
   1.9-2.0x the evolution's time; a surface that crosses itself without it is evolved again with it,
-  stats['summary']['untangled_at_iteration'] then says when), sharpen (creases and corners put back on the result; off by default),
+  stats['summary']['untangled_at_iteration'] then says when), sharpen (creases and corners put back on the result where the filtered face normals and the image both turn sharply across an edge; on by default),
   face_samples (the image force sampled at the faces' centres too; off by default).
 progress: called after every iteration with that iteration's statistics (a dict, as in
   stats['iterations']); returning False stops the evolution there (stats['summary']['stop'] is then

@@ -33,7 +33,7 @@ def assert_same_mesh(result, vertices, faces):
      {"mu_max": 4, "edge_gain": 2, "sigma": 1.5, "rho": 3}),
     (("--zeta", "3", "--smooth", "0.5", "--downsample", "2", "--open-borders"),
      {"zeta": 3, "smooth": 0.5, "downsample": 2, "open_borders": True}),
-    (("--sharpen",), {"sharpen": True}),
+    (("--no-sharpen",), {"sharpen": False}),
     (("--face-samples",), {"face_samples": True}),
 ])
 def test_file_path_gives_vdb2mesh_mesh(bin_dir, tmp_path, phantom_file, flags, kwargs):

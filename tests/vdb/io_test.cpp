@@ -932,3 +932,47 @@ TEST_CASE("sharpen: a thin plate's rim grows no fin beyond where the image puts 
     INFO("mesh->true max " << e.maxMeshToSurface << ", mean " << e.meanMeshToSurface);
     CHECK(e.maxMeshToSurface < 1.8);
 }
+
+TEST_CASE("sharpen (on by default): the phantom cube's corners come back; a noisy ball and a torus keep their round shape")
+{
+    // Creases and corners are sharpened where the filtered normals and the image both turn sharply
+    // across an edge (SharpenOptions::featureAngle, imageFeatureAngle). Measured (seed 1): cube
+    // Hausdorff 2.50 -> 1.44, true->mesh mean 0.187 -> 0.144; ball: no vertex moved; torus: 2.
+    auto measure = [](PhantomShape shape, const char* name, bool sharpen) {
+        Volume volume = phantomVolume(name, 100, 0.5, 1);
+        PhantomOptions po;
+        po.noise = 0.5;
+        po.seed = 1;
+        const Phantom p = makePhantom(shape, po);
+        const ReferenceDistance distance = phantomReferenceDistance(*p.sdf);
+        REQUIRE(bool(distance));
+        PipelineOptions options;
+        options.sharpen = sharpen;
+        const PipelineResult r = meshVolume(volume, options);
+        CHECK_MESH_OK(r.mesh);
+        CHECK(r.selfIntersections == 0);
+        return std::make_pair(r.sharpened, surfaceError(r.mesh, *p.sdf, distance));
+    };
+    CHECK(PipelineOptions{}.sharpen);
+    // (No structured bindings: clang 14 does not let INFO capture them.)
+    const auto sharpened = measure(PhantomShape::CubeCavity, "cube-cavity", true);
+    const auto rounded = measure(PhantomShape::CubeCavity, "cube-cavity", false);
+    const SurfaceError& cube = sharpened.second;
+    const SurfaceError& cubeBefore = rounded.second;
+    INFO("cube: Hausdorff " << cubeBefore.hausdorff << " -> " << cube.hausdorff << ", true->mesh "
+                            << cubeBefore.meanSurfaceToMesh << " -> " << cube.meanSurfaceToMesh << " ("
+                            << sharpened.first << " vertices moved)");
+    CHECK(rounded.first == 0);
+    CHECK(cubeBefore.hausdorff > 2.0);
+    CHECK(cube.hausdorff < 1.6);
+    CHECK(cube.meanSurfaceToMesh < 0.85 * cubeBefore.meanSurfaceToMesh);
+    CHECK(cube.meanMeshToSurface < cubeBefore.meanMeshToSurface);
+    const auto ball = measure(PhantomShape::Ball, "ball", true);
+    const auto torus = measure(PhantomShape::Torus, "torus", true);
+    INFO("ball: " << ball.first << " moved, Hausdorff " << ball.second.hausdorff << "; torus: " << torus.first
+                  << " moved, Hausdorff " << torus.second.hausdorff);
+    CHECK(ball.first < 5);
+    CHECK(torus.first < 10);
+    CHECK(ball.second.hausdorff < 0.8);
+    CHECK(torus.second.hausdorff < 1.0);
+}

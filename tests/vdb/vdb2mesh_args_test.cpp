@@ -42,13 +42,13 @@ TEST_CASE("vdb2mesh args: defaults, then every flag's value lands in its field")
     CHECK(d.maxMemory == 0);
     CHECK_FALSE(d.iso);
     CHECK_FALSE(d.help);
-    CHECK_FALSE(d.sharpen);
+    CHECK(d.sharpen);
     CHECK_FALSE(d.faceSamples);
 
     const Vdb2MeshArgs a = parse({"--delta", "2", "in.nii.gz", "--zeta", "3", "--mu-max", "4", "--iso", "40",
                                   "--metric", "euclidean", "--threads", "2", "--max-iterations", "7",
                                   "--max-vertices", "1000", "--max-memory", "1.5G", "--smooth", "0", "-q",
-                                  "out.obj", "--init", "sphere:1,2,3,4", "--sharpen", "--face-samples"});
+                                  "out.obj", "--init", "sphere:1,2,3,4", "--no-sharpen", "--face-samples"});
     CHECK(a.input == "in.nii.gz");
     CHECK(a.output == "out.obj");
     CHECK(a.delta == 2);
@@ -63,7 +63,7 @@ TEST_CASE("vdb2mesh args: defaults, then every flag's value lands in its field")
     CHECK(a.smooth == 0);
     CHECK(a.quiet);
     CHECK(parseSpheres(a.init.substr(7)).size() == 1);
-    CHECK(a.sharpen);
+    CHECK_FALSE(a.sharpen);
     CHECK(a.faceSamples);
 }
 

@@ -42,7 +42,7 @@ struct Vdb2MeshArgs {
     bool quiet = false;
     bool openBorders = false;          ///< --open-borders: do not close objects cut by the image box
     bool intersectionFree = false;     ///< --intersection-free: the guarantee (EvolutionOptions)
-    bool sharpen = false;              ///< --sharpen: creases and corners (PipelineOptions::sharpen)
+    bool sharpen = true;               ///< creases and corners (PipelineOptions::sharpen); --no-sharpen
     bool faceSamples = false;          ///< --face-samples (PipelineOptions::faceSamples)
     int downsample = 1;                ///< --downsample F: block-average F^3 voxels first
     int levels = -1;                   ///< --levels L (-1: auto)

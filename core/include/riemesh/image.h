@@ -30,6 +30,10 @@ public:
     virtual double value(const Vec3& x) const = 0;
     /// Gradient (intensity per world unit); default: central differences with step voxelSize()/2.
     virtual Vec3 gradient(const Vec3& x) const;
+    /// The gradient with respect to the image's own voxel coordinates (intensity per voxel; for a
+    /// sampled image with anisotropic or oblique voxels, not a world-space direction): the shape as
+    /// the image resolves it. Defaults to gradient(x) * voxelSize().
+    virtual Vec3 indexGradient(const Vec3& x) const { return gradient(x) * voxelSize(); }
     /// World units per voxel (the unit users give delta, sigma and rho in).
     virtual double voxelSize() const = 0;
     /// World-space box of the data (for a sparse grid: its active voxels).
@@ -93,6 +97,7 @@ public:
     double value(const Vec3& x) const override;
     Vec3 gradient(const Vec3& x) const override;
     void sample(const Vec3& x, double& value, Vec3& gradient) const override;
+    Vec3 indexGradient(const Vec3& x) const override;
     double voxelSize() const override { return mVoxelSize; }
     Box3 bounds() const override { return mBounds; }
     const nanovdb::FloatGrid* grid() const { return mGrid; }

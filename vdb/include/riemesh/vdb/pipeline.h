@@ -96,11 +96,11 @@ struct PipelineOptions {
     bool openBorders = false;       ///< do not close objects cut by the image box
     /// Intersection-free evolution (EvolutionOptions::intersectionFree); --intersection-free sets it.
     bool intersectionFree = false;
-    /// Put creases and corners back on the converged surface (riemesh/sharpen.h, --sharpen): for
-    /// shapes made of flat parts (CAD, industrial CT, the phantoms' cube); off by default, since it
-    /// also flattens the fine, rounded relief of organic shapes. A vertex moves at most
-    /// kSharpenMaxMove voxels; the result is kept only if it crosses itself no more than before.
-    bool sharpen = false;
+    /// Put creases and corners back on the converged surface (riemesh/sharpen.h; --no-sharpen turns
+    /// it off): only the vertices on or beside a crease move (SharpenOptions::featureAngle), so that
+    /// the rounded relief of organic shapes stays. A vertex moves at most kSharpenMaxMove voxels;
+    /// the result is kept only if it crosses itself no more than before.
+    bool sharpen = true;
     /// The external force samples the image at the faces' centroids as well as at the vertices
     /// (ForceOptions::vertexShare = kFaceSampleVertexShare, --face-samples): the faces, not only their
     /// corners, come to lie on the isosurface, and each vertex averages more of the noise. Off by
