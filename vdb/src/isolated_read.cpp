@@ -5,6 +5,7 @@
 
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
+#include <tbb/task_arena.h>
 
 #include <fcntl.h>
 #include <sys/mman.h>
@@ -417,22 +418,31 @@ std::uint64_t readSecondsFor(std::uint64_t bytes) { return 4 + bytes / (std::uin
     handleFaultsNearTheLimit();
     (void)lowerLimit(RLIMIT_FSIZE, memoryLimit);
     (void)lowerLimit(RLIMIT_CPU, cpuSeconds); // SIGXCPU (default: terminate) when it runs past
+    // TBB is not fork-safe: the child inherits the parent's default arena as it was at the fork,
+    // workers counted in it that do not exist here, and a parallel loop in it (OpenVDB frees a
+    // tree's nodes with one) can wait for them forever (vdb_bench reading its image, then the
+    // reference: about 1 run in 30 hung). Everything here runs in an arena of its own with no
+    // worker slot, and the grid read is never freed (the process ends with it).
     int status = 0;
-    try {
+    tbb::task_arena serial(1);
+    serial.execute([&] {
         try {
-            const openvdb::GridBase::ConstPtr grid = read();
-            AnswerWriter out([fd](std::uint64_t at, const char* p, std::size_t n) { writeAll(fd, at, p, n); });
-            putGrid(out, *grid);
-        } catch (const std::bad_alloc&) {
-            writeShortAnswer(fd, kOutOfMemory, {});
-        } catch (const std::runtime_error& e) {
-            writeShortAnswer(fd, kRefusal, e.what()); // our reader's message, naming the file
-        } catch (const std::exception& e) {
-            writeShortAnswer(fd, kRefusal, "'" + path + "': corrupt or unreadable VDB file (" + e.what() + ")");
+            try {
+                static openvdb::GridBase::ConstPtr grid;
+                grid = read();
+                AnswerWriter out([fd](std::uint64_t at, const char* p, std::size_t n) { writeAll(fd, at, p, n); });
+                putGrid(out, *grid);
+            } catch (const std::bad_alloc&) {
+                writeShortAnswer(fd, kOutOfMemory, {});
+            } catch (const std::runtime_error& e) {
+                writeShortAnswer(fd, kRefusal, e.what()); // our reader's message, naming the file
+            } catch (const std::exception& e) {
+                writeShortAnswer(fd, kRefusal, "'" + path + "': corrupt or unreadable VDB file (" + e.what() + ")");
+            }
+        } catch (...) {
+            status = kExitNoAnswer;
         }
-    } catch (...) {
-        status = kExitNoAnswer;
-    }
+    });
     ::_exit(status); // no atexit handler, no flush of the parent's stdio buffers
 }
 
