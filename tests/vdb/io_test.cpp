@@ -909,6 +909,29 @@ TEST_CASE("face samples: the head MRI block at iso 80 converges, with and withou
     }
 }
 
+/// The pipeline's mesh of a 100^3 phantom at noise 0.5, and its distances to the exact surface.
+struct PhantomMesh {
+    PipelineResult result;
+    SurfaceError error;
+};
+PhantomMesh meshPhantom(PhantomShape shape, const char* name, int seed, bool sharpen)
+{
+    Volume volume = phantomVolume(name, 100, 0.5, seed);
+    PhantomOptions po;
+    po.noise = 0.5;
+    po.seed = seed;
+    const Phantom p = makePhantom(shape, po);
+    const ReferenceDistance distance = phantomReferenceDistance(*p.sdf);
+    REQUIRE(bool(distance));
+    PipelineOptions options;
+    options.sharpen = sharpen;
+    PhantomMesh m{meshVolume(volume, options), {}};
+    CHECK_MESH_OK(m.result.mesh);
+    CHECK(m.result.selfIntersections == 0);
+    m.error = surfaceError(m.result.mesh, *p.sdf, distance);
+    return m;
+}
+
 TEST_CASE("sharpen: a thin plate's rim grows no fin beyond where the image puts the plate")
 {
     // The plate's 3-voxel rim is thinner than the model's faces: the vertices along it take the top
@@ -916,21 +939,10 @@ TEST_CASE("sharpen: a thin plate's rim grows no fin beyond where the image puts 
     // 2.5-voxel bound (mesh->true 2.33 here). Moves the smoothed image puts more than
     // kSharpenMaxOutside outside its isosurface are held back (1.47); the cube's corners (blurred
     // ~1.4 voxels in) still come out.
-    Volume volume = phantomVolume("thin-plate", 100, 0.5, 2);
-    PhantomOptions po;
-    po.noise = 0.5;
-    po.seed = 2;
-    const Phantom p = makePhantom(PhantomShape::ThinPlate, po);
-    const ReferenceDistance distance = phantomReferenceDistance(*p.sdf);
-    REQUIRE(bool(distance));
-    PipelineOptions options;
-    options.sharpen = true;
-    const PipelineResult r = meshVolume(volume, options);
-    CHECK_MESH_OK(r.mesh);
-    CHECK(r.sharpened > 0);
-    const SurfaceError e = surfaceError(r.mesh, *p.sdf, distance);
-    INFO("mesh->true max " << e.maxMeshToSurface << ", mean " << e.meanMeshToSurface);
-    CHECK(e.maxMeshToSurface < 1.8);
+    const PhantomMesh m = meshPhantom(PhantomShape::ThinPlate, "thin-plate", 2, true);
+    CHECK(m.result.sharpened > 0);
+    INFO("mesh->true max " << m.error.maxMeshToSurface << ", mean " << m.error.meanMeshToSurface);
+    CHECK(m.error.maxMeshToSurface < 1.8);
 }
 
 TEST_CASE("sharpen (on by default): the phantom cube's corners come back; a noisy ball and a torus keep their round shape")
@@ -938,41 +950,25 @@ TEST_CASE("sharpen (on by default): the phantom cube's corners come back; a nois
     // Creases and corners are sharpened where the filtered normals and the image both turn sharply
     // across an edge (SharpenOptions::featureAngle, imageFeatureAngle). Measured (seed 1): cube
     // Hausdorff 2.50 -> 1.44, true->mesh mean 0.187 -> 0.144; ball: no vertex moved; torus: 2.
-    auto measure = [](PhantomShape shape, const char* name, bool sharpen) {
-        Volume volume = phantomVolume(name, 100, 0.5, 1);
-        PhantomOptions po;
-        po.noise = 0.5;
-        po.seed = 1;
-        const Phantom p = makePhantom(shape, po);
-        const ReferenceDistance distance = phantomReferenceDistance(*p.sdf);
-        REQUIRE(bool(distance));
-        PipelineOptions options;
-        options.sharpen = sharpen;
-        const PipelineResult r = meshVolume(volume, options);
-        CHECK_MESH_OK(r.mesh);
-        CHECK(r.selfIntersections == 0);
-        return std::make_pair(r.sharpened, surfaceError(r.mesh, *p.sdf, distance));
-    };
     CHECK(PipelineOptions{}.sharpen);
-    // (No structured bindings: clang 14 does not let INFO capture them.)
-    const auto sharpened = measure(PhantomShape::CubeCavity, "cube-cavity", true);
-    const auto rounded = measure(PhantomShape::CubeCavity, "cube-cavity", false);
-    const SurfaceError& cube = sharpened.second;
-    const SurfaceError& cubeBefore = rounded.second;
+    const PhantomMesh sharpened = meshPhantom(PhantomShape::CubeCavity, "cube-cavity", 1, true);
+    const PhantomMesh rounded = meshPhantom(PhantomShape::CubeCavity, "cube-cavity", 1, false);
+    const SurfaceError& cube = sharpened.error;
+    const SurfaceError& cubeBefore = rounded.error;
     INFO("cube: Hausdorff " << cubeBefore.hausdorff << " -> " << cube.hausdorff << ", true->mesh "
                             << cubeBefore.meanSurfaceToMesh << " -> " << cube.meanSurfaceToMesh << " ("
-                            << sharpened.first << " vertices moved)");
-    CHECK(rounded.first == 0);
+                            << sharpened.result.sharpened << " vertices moved)");
+    CHECK(rounded.result.sharpened == 0);
     CHECK(cubeBefore.hausdorff > 2.0);
     CHECK(cube.hausdorff < 1.6);
     CHECK(cube.meanSurfaceToMesh < 0.85 * cubeBefore.meanSurfaceToMesh);
     CHECK(cube.meanMeshToSurface < cubeBefore.meanMeshToSurface);
-    const auto ball = measure(PhantomShape::Ball, "ball", true);
-    const auto torus = measure(PhantomShape::Torus, "torus", true);
-    INFO("ball: " << ball.first << " moved, Hausdorff " << ball.second.hausdorff << "; torus: " << torus.first
-                  << " moved, Hausdorff " << torus.second.hausdorff);
-    CHECK(ball.first < 5);
-    CHECK(torus.first < 10);
-    CHECK(ball.second.hausdorff < 0.8);
-    CHECK(torus.second.hausdorff < 1.0);
+    const PhantomMesh ball = meshPhantom(PhantomShape::Ball, "ball", 1, true);
+    const PhantomMesh torus = meshPhantom(PhantomShape::Torus, "torus", 1, true);
+    INFO("ball: " << ball.result.sharpened << " moved, Hausdorff " << ball.error.hausdorff << "; torus: "
+                  << torus.result.sharpened << " moved, Hausdorff " << torus.error.hausdorff);
+    CHECK(ball.result.sharpened < 5);
+    CHECK(torus.result.sharpened < 10);
+    CHECK(ball.error.hausdorff < 0.8);
+    CHECK(torus.error.hausdorff < 1.0);
 }
