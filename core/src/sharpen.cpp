@@ -1,5 +1,7 @@
 #include "riemesh/sharpen.h"
 
+#include "detail/parallel.h"
+
 #include <Eigen/Dense>
 
 #include <algorithm>
@@ -88,11 +90,37 @@ SharpenStats sharpenFeatures(Mesh& mesh, const SharpenOptions& o)
     const double featureCos = cosOf(o.featureAngle), imageCos = cosOf(o.imageFeatureAngle);
     std::vector<Vec3> filtered, next(nf), moved(nv);
     std::vector<char> keep(nv), feature(nv);
+    const bool imageGated = o.image && imageCos < 1;
+    std::vector<char> imageCrease(imageGated ? mesh.n_edges() : 0);
+    auto imageNormal = [&](const Vec3& q) {
+        const Vec3 g = o.image->indexGradient(q);
+        const double len = g.norm();
+        return len > 0 ? Vec3(g / len) : Vec3::Zero();
+    };
     for (int round = 0; round < o.rounds; ++round) {
         measureFaces(mesh, x, geo);
+        // The image's say, edge by edge: its own normals a little way into either face from the
+        // edge's middle (first, as it is cheap: where the image shows no crease, nothing moves, and
+        // a surface without one is left as it is without filtering its normals).
+        if (imageGated) {
+            detail::parallelFor(0, mesh.n_edges(), 1024, [&](std::size_t e) {
+                imageCrease[e] = 0;
+                const EdgeHandle edge{int(e)};
+                if (mesh.status(edge).deleted()) return;
+                const HalfedgeHandle h = mesh.halfedge_handle(edge, 0);
+                const FaceHandle f = mesh.face_handle(h), g = mesh.face_handle(mesh.opposite_halfedge_handle(h));
+                if (!f.is_valid() || !g.is_valid()) return;
+                const Vec3 m = 0.5 * (x[std::size_t(mesh.from_vertex_handle(h).idx())] + x[std::size_t(mesh.to_vertex_handle(h).idx())]);
+                const Vec3 ta = geo.centroid[std::size_t(f.idx())] - m, tb = geo.centroid[std::size_t(g.idx())] - m;
+                if (!(ta.norm() > 0) || !(tb.norm() > 0)) return;
+                const double step = o.imageStep * o.image->voxelSize();
+                imageCrease[e] = imageNormal(m + step * ta.normalized()).dot(imageNormal(m + step * tb.normalized())) <= imageCos;
+            });
+            if (std::find(imageCrease.begin(), imageCrease.end(), 1) == imageCrease.end()) break;
+        }
         filtered = geo.normal;
         for (int k = 0; k < o.normalIterations; ++k) {
-            for (std::size_t f = 0; f < nf; ++f) {
+            detail::parallelFor(0, nf, 256, [&](std::size_t f) {
                 Vec3 m = Vec3::Zero();
                 for (std::size_t j = first[f]; j < first[f + 1]; ++j) {
                     const std::size_t g = std::size_t(ring[j]);
@@ -102,32 +130,20 @@ SharpenStats sharpenFeatures(Mesh& mesh, const SharpenOptions& o)
                 }
                 const double len = m.norm();
                 next[f] = len > 0 ? Vec3(m / len) : filtered[f];
-            }
+            });
             std::swap(filtered, next);
         }
 
         // The vertices on a crease or a corner: at an edge of theirs, the filtered normals of the
         // two faces differ by more than the feature angle, and so do the image's own normals on
         // either side (SharpenOptions::featureAngle, imageFeatureAngle).
-        const bool gated = featureCos < 1 || (o.image && imageCos < 1);
+        const bool gated = featureCos < 1 || imageGated;
         feature.assign(nv, gated ? 0 : 1);
-        auto imageNormal = [&](const Vec3& q) {
-            const Vec3 g = o.image->indexGradient(q);
-            const double len = g.norm();
-            return len > 0 ? Vec3(g / len) : Vec3::Zero();
-        };
         auto crease = [&](HalfedgeHandle h) {
             const FaceHandle f = mesh.face_handle(h), g = mesh.face_handle(mesh.opposite_halfedge_handle(h));
             if (!f.is_valid() || !g.is_valid()) return false;
-            const std::size_t a = std::size_t(f.idx()), b = std::size_t(g.idx());
-            if (filtered[a].dot(filtered[b]) > featureCos) return false;
-            if (!o.image) return true;
-            // The image's normals a little way into each face from the edge's midpoint.
-            const Vec3 m = 0.5 * (x[std::size_t(mesh.from_vertex_handle(h).idx())] + x[std::size_t(mesh.to_vertex_handle(h).idx())]);
-            const Vec3 ta = geo.centroid[a] - m, tb = geo.centroid[b] - m;
-            if (!(ta.norm() > 0) || !(tb.norm() > 0)) return false;
-            const double step = o.imageStep * o.image->voxelSize();
-            return imageNormal(m + step * ta.normalized()).dot(imageNormal(m + step * tb.normalized())) <= imageCos;
+            return filtered[std::size_t(f.idx())].dot(filtered[std::size_t(g.idx())]) <= featureCos &&
+                   (!imageGated || imageCrease[std::size_t(mesh.edge_handle(h).idx())]);
         };
         if (gated)
             for (auto v : mesh.vertices())
@@ -138,8 +154,8 @@ SharpenStats sharpenFeatures(Mesh& mesh, const SharpenOptions& o)
                     }
         // Each of those to the point nearest the planes of its faces (filtered normal, through the
         // face's centroid), with a weak pull to where it is: along a crease only that pull holds
-        // it. The planes stay put during a round
-        // (updates through moving centroids would shrink curved parts as Laplacian smoothing does).
+        // it. The planes stay put during a round (updates through moving centroids would shrink
+        // curved parts as Laplacian smoothing does).
         for (auto v : mesh.vertices()) {
             const std::size_t i = std::size_t(v.idx());
             if (!feature[i]) { // left where the evolution put it
