@@ -319,8 +319,9 @@ class Report:
     def deltas(r, scale):
         """The Euclidean models' deltas, as in the paper (section 5: "the mesh resolutions of the
         Euclidean models are chosen so as to correspond to the minimal and maximal edge lengths achieved
-        by our Riemannian model"): the shortest and the longest Euclidean edge of the Riemannian result,
-        plus its 5th and 95th percentiles for a sensitivity check. Nominal 1.5 and 6 voxels (x scale)
+        by our Riemannian model"): the shortest and the longest Euclidean edge of the Riemannian model's
+        result as the evolution leaves it (a --no-sharpen run: the sharpening's moves shorten edges at
+        corners), plus its 5th and 95th percentiles for a sensitivity check. Nominal 1.5 and 6 voxels (x scale)
         when that run failed or left no surface."""
         lengths = obj_edge_lengths(r["mesh"]) if ok(r) else []
         if not lengths:
@@ -334,7 +335,8 @@ class Report:
                     "surface to take edge lengths from.\n" % (fmt(d["fine"]), fmt(d["coarse"]), unit))
         return ("Deltas, as in the paper (\"the mesh resolutions of the Euclidean models are chosen so as to "
                 "correspond to the minimal and maximal edge lengths achieved by our Riemannian model\"): the "
-                "fine Euclidean model's delta is the Riemannian result's shortest Euclidean edge (%s %s), the "
+                "fine Euclidean model's delta is the Riemannian result's shortest Euclidean edge before sharpening "
+                "(%s %s), the "
                 "coarse one's its longest (%s %s). The Riemannian edges' 5th and 95th percentiles are %s and "
                 "%s %s.\n" % (fmt(d["fine"]), unit, fmt(d["coarse"]), unit, fmt(d["p5"]), fmt(d["p95"]), unit))
 
@@ -354,7 +356,8 @@ class Report:
             self.md.append("The phantom could not be made: %s\n" % b.failures[-1][1])
             return
         r = b.vdb2mesh("phantom_R", img, ["--delta", "%g" % (3 * self.scale)], self.timeout)
-        d = self.deltas(r, self.scale)
+        d = self.deltas(b.vdb2mesh("phantom_R_unsharpened", img, ["--delta", "%g" % (3 * self.scale), "--no-sharpen"],
+                                   self.timeout), self.scale)
         self.results["deltas"] = d
         fe = b.vdb2mesh("phantom_FE", img, ["--metric", "euclidean", "--delta", "%.4g" % d["fine"]], self.timeout)
         ce = b.vdb2mesh("phantom_CE", img, ["--metric", "euclidean", "--delta", "%.4g" % d["coarse"]], self.timeout)
@@ -920,7 +923,8 @@ class Report:
             return
         cap, timeout = "400", 480
         r = b.vdb2mesh("head_R", HEAD, ["--iso", "40", "--max-iterations", cap], timeout, reference=False)
-        d = self.deltas(r, 1.0)
+        d = self.deltas(b.vdb2mesh("head_R_unsharpened", HEAD, ["--iso", "40", "--max-iterations", cap, "--no-sharpen"],
+                                   timeout, reference=False), 1.0)
         fe = b.vdb2mesh("head_FE", HEAD, ["--iso", "40", "--metric", "euclidean", "--delta", "%.4g" % d["fine"],
                                           "--max-iterations", cap], timeout, reference=False)
         ce = b.vdb2mesh("head_CE", HEAD, ["--iso", "40", "--metric", "euclidean", "--delta", "%.4g" % d["coarse"],
