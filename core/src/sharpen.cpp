@@ -91,6 +91,7 @@ SharpenStats sharpenFeatures(Mesh& mesh, const SharpenOptions& o)
     std::vector<Vec3> filtered, next(nf), moved(nv);
     std::vector<char> keep(nv), feature(nv);
     const bool imageGated = o.image && imageCos < 1;
+    const double step = imageGated ? o.imageStep * o.image->voxelSize() : 0.0; // world units
     std::vector<char> imageCrease(imageGated ? mesh.n_edges() : 0);
     auto imageNormal = [&](const Vec3& q) {
         const Vec3 g = o.image->indexGradient(q);
@@ -115,7 +116,6 @@ SharpenStats sharpenFeatures(Mesh& mesh, const SharpenOptions& o)
                 const Vec3 m = 0.5 * (p0 + p1), along = p1 - p0;
                 const Vec3 ta = geo.centroid[std::size_t(f.idx())] - m, tb = geo.centroid[std::size_t(g.idx())] - m;
                 if (!(ta.norm() > 0) || !(tb.norm() > 0)) return;
-                const double step = o.imageStep * o.image->voxelSize();
                 // Each side's normal from three samples along the edge: the noise a single gradient
                 // carries (tens of degrees at noise 0.5) otherwise passes for a crease now and then.
                 auto sideNormal = [&](const Vec3& t) {

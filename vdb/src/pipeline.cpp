@@ -335,8 +335,9 @@ PipelineResult meshVolume(Volume& volume, const PipelineOptions& options)
     }
     if (options.sharpen) {
         // Kept only if it adds no crossing: the moves are small (a few voxels at most), but nothing
-        // checks them against the surface's other sheets.
-        const std::size_t before = findSelfIntersections(r.mesh).count();
+        // checks them against the surface's other sheets. The surface is searched for crossings
+        // only when a vertex moved, and the one before only when the sharpened one has some (on by
+        // default, sharpening would otherwise add two searches of the whole surface to every run).
         std::vector<Mesh::Point> kept;
         kept.reserve(r.mesh.n_vertices());
         for (auto v : r.mesh.vertices()) kept.push_back(r.mesh.point(v));
@@ -348,10 +349,18 @@ PipelineResult meshVolume(Volume& volume, const PipelineOptions& options)
         so.maxOutside = kSharpenMaxOutside * h;
         const SharpenStats ss = sharpenFeatures(r.mesh, so);
         r.sharpened = ss.moved;
-        if (findSelfIntersections(r.mesh).count() > before) {
+        const std::size_t after = ss.largestMove > 0 ? findSelfIntersections(r.mesh).count() : 0;
+        if (after > 0) {
+            std::vector<Mesh::Point> sharpened;
+            sharpened.reserve(kept.size());
             std::size_t i = 0;
-            for (auto v : r.mesh.vertices()) r.mesh.point(v) = kept[i++];
-            r.sharpened = 0;
+            for (auto v : r.mesh.vertices()) sharpened.push_back(r.mesh.point(v)), r.mesh.point(v) = kept[i++];
+            if (after <= findSelfIntersections(r.mesh).count()) { // no crossing added: the sharpened surface
+                i = 0;
+                for (auto v : r.mesh.vertices()) r.mesh.point(v) = sharpened[i++];
+            } else {
+                r.sharpened = 0;
+            }
         }
     }
     analyseResult(r);

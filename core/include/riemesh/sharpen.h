@@ -48,9 +48,9 @@ struct SharpenOptions {
     /// filtered normals more than featureAngle (degrees) apart while, with an image, the image's own
     /// normals imageStep voxels into either face from their edge (each side's the mean of three
     /// samples along the edge, in the image's voxel coordinates: the shape as the image resolves
-    /// it) differ by more than imageFeatureAngle. A crease blurred by a Gaussian of sigma 1 turns the image's normals by
-    /// most of its angle within 1.5 voxels of it; a round part of radius R by 1.5 / R radians on
-    /// each side. Elsewhere fitting the vertices to the filtered normals flattens organic relief
+    /// it) differ by more than imageFeatureAngle. A crease blurred by a Gaussian of sigma 1 turns
+    /// the image's normals by most of its angle within 1.5 voxels of it; a round part of radius R
+    /// by 1.5 / R radians on each side. Elsewhere fitting the vertices to the filtered normals flattens organic relief
     /// (the head MRI's skin, from the image's isosurface: 0.065 -> 0.176 voxel on average when
     /// every vertex is fitted, 0.067 with these), and on a coarsely sampled round part, whose faces
     /// the filter groups into facets, it puts vertices out on the facets' corners (the torus

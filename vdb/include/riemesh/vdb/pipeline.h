@@ -97,7 +97,7 @@ struct PipelineOptions {
     /// Intersection-free evolution (EvolutionOptions::intersectionFree); --intersection-free sets it.
     bool intersectionFree = false;
     /// Put creases and corners back on the converged surface (riemesh/sharpen.h; --no-sharpen turns
-    /// it off): only the vertices on or beside a crease move (SharpenOptions::featureAngle), so that
+    /// it off): only the vertices on a crease or a corner move (SharpenOptions::featureAngle), so that
     /// the rounded relief of organic shapes stays. A vertex moves at most kSharpenMaxMove voxels;
     /// the result is kept only if it crosses itself no more than before.
     bool sharpen = true;
