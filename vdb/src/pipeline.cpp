@@ -338,9 +338,7 @@ PipelineResult meshVolume(Volume& volume, const PipelineOptions& options)
         // checks them against the surface's other sheets. The surface is searched for crossings
         // only when a vertex moved, and the one before only when the sharpened one has some (on by
         // default, sharpening would otherwise add two searches of the whole surface to every run).
-        std::vector<Mesh::Point> kept;
-        kept.reserve(r.mesh.n_vertices());
-        for (auto v : r.mesh.vertices()) kept.push_back(r.mesh.point(v));
+        Mesh kept = r.mesh; // (sharpening may split the vertices of thin rims)
         SharpenOptions so;
         so.maxMove = kSharpenMaxMove * h;
         so.image = &image;
@@ -349,18 +347,12 @@ PipelineResult meshVolume(Volume& volume, const PipelineOptions& options)
         so.maxOutside = kSharpenMaxOutside * h;
         const SharpenStats ss = sharpenFeatures(r.mesh, so);
         r.sharpened = ss.moved;
-        const std::size_t after = ss.largestMove > 0 ? findSelfIntersections(r.mesh).count() : 0;
-        if (after > 0) {
-            std::vector<Mesh::Point> sharpened;
-            sharpened.reserve(kept.size());
-            std::size_t i = 0;
-            for (auto v : r.mesh.vertices()) sharpened.push_back(r.mesh.point(v)), r.mesh.point(v) = kept[i++];
-            if (after <= findSelfIntersections(r.mesh).count()) { // no crossing added: the sharpened surface
-                i = 0;
-                for (auto v : r.mesh.vertices()) r.mesh.point(v) = sharpened[i++];
-            } else {
-                r.sharpened = 0;
-            }
+        r.rimSplits = ss.rimSplits;
+        const bool changed = ss.largestMove > 0 || ss.rimSplits > 0;
+        const std::size_t after = changed ? findSelfIntersections(r.mesh).count() : 0;
+        if (after > 0 && after > findSelfIntersections(kept).count()) { // a crossing added: the surface before
+            r.mesh = std::move(kept);
+            r.sharpened = r.rimSplits = 0;
         }
     }
     analyseResult(r);
@@ -471,6 +463,7 @@ std::string pipelineStatsJson(const PipelineResult& r, const PipelineRecord& rec
                     {"write_seconds", record.writeSeconds},
                     {"malloc_huge_pages", mallocHugePages()},
                     {"sharpened_vertices", r.sharpened},
+                    {"rim_splits", r.rimSplits},
                     {"splits", e.splits},
                     {"collapses", e.collapses},
                     {"flips", e.flips},

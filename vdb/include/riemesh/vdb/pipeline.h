@@ -158,6 +158,7 @@ struct PipelineResult {
     bool objectBrighter = true;         ///< inside is above iso (false for level sets)
     std::uint64_t borderVoxels = 0;     ///< voxels added by border closing
     std::size_t sharpened = 0;          ///< vertices moved by --sharpen (0 when off or undone)
+    std::size_t rimSplits = 0;          ///< thin-rim vertices split in two by the sharpening (SharpenStats)
     int levels = 0;                     ///< coarse-to-fine levels used below the finest
     VolumeMetricStats metric;           ///< zero with the Euclidean metric
     ImageInfo image;                    ///< the image meshed (after downsampling)
