@@ -127,6 +127,31 @@ bool markImageCreases(const Mesh& mesh, const std::vector<Vec3>& x, const FaceGe
     return std::find(crease.begin(), crease.end(), 1) != crease.end();
 }
 
+/// Each face's plane point: where the line along its filtered normal from its centroid first
+/// crosses the image's isosurface within planeSearch voxels (SharpenOptions::planeSearch), else
+/// the centroid.
+void faceAnchors(const FaceGeometry& geo, const std::vector<Vec3>& filtered, const SharpenOptions& o, std::vector<Vec3>& anchor)
+{
+    anchor = geo.centroid;
+    if (!o.image || !(o.planeSearch > 0)) return;
+    const double h = 0.25 * o.image->voxelSize(), reach = o.planeSearch * o.image->voxelSize();
+    const double sign = o.objectBrighter ? 1.0 : -1.0;
+    detail::parallelFor(0, anchor.size(), 256, [&](std::size_t f) {
+        const Vec3& n = filtered[f];
+        const Vec3& c = geo.centroid[f];
+        if (!(n.squaredNorm() > 0)) return;
+        auto inside = [&](double t) { return sign * (o.image->value(c + t * n) - o.iso); };
+        // The nearest crossing, outward or inward, at quarter-voxel steps, interpolated.
+        for (double t = h; t <= reach + 1e-9 * h; t += h)
+            for (const double dir : {1.0, -1.0}) {
+                const double before = inside(dir * (t - h)), now = inside(dir * t);
+                if ((before > 0) == (now > 0)) continue;
+                anchor[f] = c + dir * (t - h + h * before / (before - now)) * n;
+                return;
+            }
+    });
+}
+
 double meanEdgeLength(const Mesh& mesh)
 {
     double sum = 0;
@@ -239,13 +264,152 @@ std::size_t splitRims(Mesh& mesh, const SharpenOptions& o)
     return splits;
 }
 
-} // namespace
-
-SharpenStats sharpenFeatures(Mesh& mesh, const SharpenOptions& o)
+/// The unit gradient of the image in its voxel coordinates (zero where it vanishes).
+Vec3 unitIndexGradient(const ScalarImage& image, const Vec3& q)
 {
-    SharpenStats stats;
-    if (mesh.n_vertices() == 0 || mesh.n_faces() == 0) return stats;
-    if (o.rimAngle < 180) stats.rimSplits = splitRims(mesh, o);
+    const Vec3 g = image.indexGradient(q);
+    const double len = g.norm();
+    return len > 0 ? Vec3(g / len) : Vec3::Zero();
+}
+
+/// Chamfers cut across a crease (SharpenOptions::insertCreases): a face whose neighbours' filtered
+/// normals make two planes more than twice featureAngle apart, which lies on neither (its own
+/// normal more than chamferAngle from both) and whose crease, the planes' intersection, passes over
+/// it at least chamferDepth voxels away, gets a vertex on the crease (a 1-to-3 split). With an
+/// image, its normals a little way into either plane from that point must be imageFeatureAngle
+/// apart. Returns the vertices added.
+std::vector<VertexHandle> insertCreaseVertices(Mesh& mesh, const SharpenOptions& o)
+{
+    std::vector<VertexHandle> added;
+    const std::size_t nv = mesh.n_vertices(), nf = mesh.n_faces();
+    std::vector<Vec3> x(nv);
+    for (auto v : mesh.vertices()) x[std::size_t(v.idx())] = position(mesh, v);
+    FaceGeometry geo;
+    measureFaces(mesh, x, geo);
+    const double meanEdge = meanEdgeLength(mesh);
+    const FaceRings rings = faceRings(mesh);
+    std::vector<Vec3> filtered, scratch, anchor;
+    filterNormals(geo, rings, meanEdge, o, filtered, scratch);
+    faceAnchors(geo, filtered, o, anchor);
+    const double clusterCos = cosOf(2 * o.featureAngle), chamferCos = cosOf(o.chamferAngle);
+    const bool imageGated = o.image && cosOf(o.imageFeatureAngle) < 1;
+    const double voxel = o.image ? o.image->voxelSize() : meanEdge;
+    const double imageCos = cosOf(o.imageFeatureAngle), step = o.imageStep * voxel;
+
+    struct Candidate {
+        FaceHandle f;
+        Vec3 p;
+        double depth;
+    };
+    std::vector<Candidate> found;
+    for (std::size_t fi = 0; fi < nf; ++fi) {
+        const FaceHandle f{int(fi)};
+        if (mesh.status(f).deleted() || !(geo.area[fi] > 0)) continue;
+        const std::size_t begin = rings.first[fi], end = rings.first[fi + 1];
+        // The planes around the face: its neighbours' filtered normals clustered about seeds at
+        // least twice featureAngle apart, each seed the normal farthest from those before (the
+        // first two the most opposed pair), up to four (a thin plate's corner: top, bottom and two
+        // sides); each plane the clusters' area-weighted mean normal and plane point.
+        double lowest = 2;
+        Vec3 seeds[4];
+        int count = 0;
+        for (std::size_t j = begin; j < end; ++j)
+            for (std::size_t k = j + 1; k < end; ++k) {
+                const Vec3& nj = filtered[std::size_t(rings.ring[j])];
+                const Vec3& nk = filtered[std::size_t(rings.ring[k])];
+                if (const double d = nj.dot(nk); d < lowest) lowest = d, seeds[0] = nj, seeds[1] = nk;
+            }
+        if (!(lowest < clusterCos)) continue;
+        count = 2;
+        while (count < 4) {
+            double farthest = 2; // the largest cosine to the nearest seed, minimised
+            Vec3 next = Vec3::Zero();
+            for (std::size_t j = begin; j < end; ++j) {
+                const Vec3& nj = filtered[std::size_t(rings.ring[j])];
+                double nearest = -2;
+                for (int i = 0; i < count; ++i) nearest = std::max(nearest, nj.dot(seeds[i]));
+                if (nearest < farthest) farthest = nearest, next = nj;
+            }
+            if (!(farthest < clusterCos)) break;
+            seeds[count++] = next;
+        }
+        Vec3 normal[4], point[4];
+        double weight[4] = {0, 0, 0, 0};
+        for (int i = 0; i < count; ++i) normal[i] = point[i] = Vec3::Zero();
+        for (std::size_t j = begin; j < end; ++j) {
+            const std::size_t g = std::size_t(rings.ring[j]);
+            int best = 0;
+            for (int i = 1; i < count; ++i)
+                if (filtered[g].dot(seeds[i]) > filtered[g].dot(seeds[best])) best = i;
+            normal[best] += geo.area[g] * filtered[g], point[best] += geo.area[g] * anchor[g], weight[best] += geo.area[g];
+        }
+        const Vec3& n = geo.normal[fi];
+        const Vec3& c = geo.centroid[fi];
+        // The planes the face cuts across: those it faces (within ~80 degrees), none of which it
+        // lies on; two make a crease, three a corner.
+        int used[3], planes = 0;
+        bool onPlane = false;
+        for (int i = 0; i < count; ++i) {
+            if (!(weight[i] > 0) || !(normal[i].norm() > 0)) continue;
+            normal[i].normalize(), point[i] /= weight[i];
+            if (n.dot(normal[i]) > chamferCos && std::abs(normal[i].dot(c - point[i])) < 0.5 * o.chamferDepth * voxel) onPlane = true;
+            if (n.dot(normal[i]) > 0.2 && planes < 3) used[planes++] = i;
+        }
+        if (onPlane || planes < 2) continue;
+        Eigen::Matrix3d M;
+        Vec3 rhs;
+        Vec3 dir = Vec3::Zero();
+        for (int r = 0; r < planes; ++r) M.row(r) = normal[used[r]].transpose(), rhs[r] = normal[used[r]].dot(point[used[r]]);
+        if (planes == 2) { // the crease's point nearest the centroid
+            dir = normal[used[0]].cross(normal[used[1]]);
+            if (!(dir.norm() > 0.5)) continue;
+            dir.normalize();
+            M.row(2) = dir.transpose(), rhs[2] = dir.dot(c);
+        } else if (std::abs(M.determinant()) < 0.3) { // three planes meeting well in one point
+            continue;
+        }
+        const Vec3 p = M.colPivHouseholderQr().solve(rhs);
+        if (!std::isfinite(p.x()) || !std::isfinite(p.y()) || !std::isfinite(p.z())) continue;
+        const double depth = n.dot(p - c);
+        if (!(depth >= o.chamferDepth * voxel) || (p - c).norm() > meanEdge) continue; // convex creases only (see insertCreases)
+        const Vec3 na = normal[used[0]], nb = normal[used[1]];
+        if (planes == 3) dir = na.cross(nb).normalized();
+        // Over the face: its projection inside the triangle.
+        const auto [va, vb, vc] = faceVertices(mesh, f);
+        const Vec3 &A = x[std::size_t(va.idx())], &B = x[std::size_t(vb.idx())], &C = x[std::size_t(vc.idx())];
+        const Vec3 q = p - depth * n;
+        const double area2 = (B - A).cross(C - A).dot(n);
+        const double u = (C - B).cross(q - B).dot(n) / area2, v = (A - C).cross(q - C).dot(n) / area2;
+        if (!(u >= 0 && v >= 0 && u + v <= 1)) continue;
+        if (imageGated) { // the image's normals a little way into either plane from p
+            auto into = [&](const Vec3& nPlane) {
+                const Vec3 t = nPlane.cross(dir).normalized();
+                const Vec3 n1 = unitIndexGradient(*o.image, p + step * t), n2 = unitIndexGradient(*o.image, p - step * t);
+                const double sign = o.objectBrighter ? -1.0 : 1.0; // the gradient points inward for a bright object
+                return (sign * n1).dot(nPlane) >= (sign * n2).dot(nPlane) ? Vec3(sign * n1) : Vec3(sign * n2);
+            };
+            if (!(into(na).dot(into(nb)) <= imageCos)) continue;
+        }
+        found.push_back({f, p, depth});
+    }
+    // Deepest first; none within half a mean edge of another.
+    std::sort(found.begin(), found.end(), [](const Candidate& l, const Candidate& r) { return std::abs(l.depth) > std::abs(r.depth); });
+    std::vector<Vec3> placed;
+    for (const Candidate& k : found) {
+        bool near = false;
+        for (const Vec3& q : placed) near |= (q - k.p).norm() < 0.5 * meanEdge;
+        if (near) continue;
+        added.push_back(mesh.split(k.f, toPoint(k.p)));
+        placed.push_back(k.p);
+    }
+    return added;
+}
+
+/// One pass: thin rims split, then the vertices on creases and corners fitted (see the file
+/// comment); `stats` gets the splits and the refusals.
+void sharpenPass(Mesh& mesh, const SharpenOptions& o, SharpenStats& stats)
+{
+    if (o.rimAngle < 180) stats.rimSplits += splitRims(mesh, o);
     const std::size_t nv = mesh.n_vertices(), nf = mesh.n_faces();
     std::vector<Vec3> x(nv);
     for (auto v : mesh.vertices()) x[std::size_t(v.idx())] = position(mesh, v);
@@ -265,7 +429,7 @@ SharpenStats sharpenFeatures(Mesh& mesh, const SharpenOptions& o)
         vertexEdge[a] += len, vertexEdge[b] += len;
         ++vertexEdges[a], ++vertexEdges[b];
     }
-    if (edgeCount == 0) return stats;
+    if (edgeCount == 0) return;
     const double meanEdge = edgeSum / double(edgeCount);
     for (std::size_t i = 0; i < nv; ++i)
         vertexEdge[i] = vertexEdges[i] > 0 ? vertexEdge[i] / vertexEdges[i] : meanEdge;
@@ -287,23 +451,31 @@ SharpenStats sharpenFeatures(Mesh& mesh, const SharpenOptions& o)
         filterNormals(geo, rings, meanEdge, o, filtered, next);
         // Each face's plane: through where the image's isosurface crosses the line along its
         // filtered normal from its centroid (SharpenOptions::planeSearch), or the centroid.
-        anchor = geo.centroid;
-        if (o.image && o.planeSearch > 0) {
-            const double h = 0.25 * o.image->voxelSize(), reach = o.planeSearch * o.image->voxelSize();
-            const double sign = o.objectBrighter ? 1.0 : -1.0;
+        faceAnchors(geo, filtered, o, anchor);
+        // Each plane's offset: from its neighbours on the same plane (SharpenOptions::samePlaneAngle)
+        // as well as its own anchor, each weighted by how well the image's normal there agrees with
+        // the plane's (SharpenOptions::anchorAgreement): near a rounded crease or corner it does
+        // not, and those anchors lie inside it.
+        std::vector<double> offset(nf);
+        {
+            const double power = o.anchorAgreement;
+            std::vector<double> reliability(nf, 1.0);
+            if (o.image && power > 0)
+                detail::parallelFor(0, nf, 256, [&](std::size_t g) {
+                    const Vec3 m = (o.objectBrighter ? -1.0 : 1.0) * unitIndexGradient(*o.image, anchor[g]);
+                    reliability[g] = std::pow(std::max(0.0, m.dot(filtered[g])), power);
+                });
+            const double same = cosOf(o.samePlaneAngle);
             detail::parallelFor(0, nf, 256, [&](std::size_t f) {
-                const Vec3& n = filtered[f];
-                const Vec3& c = geo.centroid[f];
-                if (!(n.squaredNorm() > 0)) return;
-                auto inside = [&](double t) { return sign * (o.image->value(c + t * n) - o.iso); };
-                // The nearest crossing, outward or inward, at quarter-voxel steps, interpolated.
-                for (double t = h; t <= reach + 1e-9 * h; t += h)
-                    for (const double dir : {1.0, -1.0}) {
-                        const double before = inside(dir * (t - h)), now = inside(dir * t);
-                        if ((before > 0) == (now > 0)) continue;
-                        anchor[f] = c + dir * (t - h + h * before / (before - now)) * n;
-                        return;
+                double sum = 0, weight = 0;
+                if (power > 0)
+                    for (std::size_t j = rings.first[f]; j < rings.first[f + 1]; ++j) {
+                        const std::size_t g = std::size_t(rings.ring[j]);
+                        if (filtered[g].dot(filtered[f]) < same) continue;
+                        const double w = geo.area[g] * reliability[g];
+                        sum += w * filtered[f].dot(anchor[g]), weight += w;
                     }
+                offset[f] = weight > 0 ? sum / weight : filtered[f].dot(anchor[f]);
             });
         }
 
@@ -342,7 +514,7 @@ SharpenStats sharpenFeatures(Mesh& mesh, const SharpenOptions& o)
                 const std::size_t fi = std::size_t(f.idx());
                 const Vec3& n = filtered[fi];
                 A += n * n.transpose();
-                rhs += n * n.dot(anchor[fi]);
+                rhs += n * offset[fi];
                 ++count;
             }
             const double lambda = o.pull * count;
@@ -392,12 +564,30 @@ SharpenStats sharpenFeatures(Mesh& mesh, const SharpenOptions& o)
             x[i] = moved[i];
         }
     }
+    for (auto v : mesh.vertices()) mesh.point(v) = toPoint(x[std::size_t(v.idx())]);
+}
+
+} // namespace
+
+SharpenStats sharpenFeatures(Mesh& mesh, const SharpenOptions& o)
+{
+    SharpenStats stats;
+    if (mesh.n_vertices() == 0 || mesh.n_faces() == 0) return stats;
+    const std::size_t before = mesh.n_vertices();
+    std::vector<Vec3> start(before);
+    for (auto v : mesh.vertices()) start[std::size_t(v.idx())] = position(mesh, v);
+    for (int pass = 0; pass < o.passes; ++pass) sharpenPass(mesh, o, stats);
+    if (o.insertCreases) stats.creaseVertices = insertCreaseVertices(mesh, o).size();
+    const double meanEdge = meanEdgeLength(mesh);
     for (auto v : mesh.vertices()) {
         const std::size_t i = std::size_t(v.idx());
-        const double move = (x[i] - start[i]).norm();
+        if (i >= before) { // added by a split or on a crease
+            ++stats.moved;
+            continue;
+        }
+        const double move = (position(mesh, v) - start[i]).norm();
         if (move > 1e-6 * meanEdge) ++stats.moved;
         stats.largestMove = std::max(stats.largestMove, move);
-        mesh.point(v) = toPoint(x[i]);
     }
     return stats;
 }

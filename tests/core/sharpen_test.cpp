@@ -83,8 +83,8 @@ TEST_CASE("sharpen: a cube rounded by r = 1.5 (edges 1.5) gets its corners and e
                               << before.cornerToMesh << " -> " << after.cornerToMesh << "; moved " << s.moved
                               << ", refused " << s.refused << ", largest move " << s.largestMove);
     // The rounding moves the corners in by r (sqrt 3 - 1) = 1.10 and the edges by r (sqrt 2 - 1).
-    // Measured: corner 1.10 -> 0.35, farthest vertex 0.63 -> 0.20, 164 vertices moved (when every
-    // vertex was fitted, the flat sides' too: 0.63 / 0.36).
+    // Measured: corner 1.10 -> 0.035, farthest vertex 0.63 -> 0.020, 164 vertices moved, in two
+    // passes (one pass: 0.35 / 0.20; when every vertex was fitted, the flat sides' too: 0.63 / 0.36).
     CHECK(before.cornerToMesh > 1.05);
     CHECK(after.cornerToMesh < 0.75);
     CHECK(after.vertexToBox < 0.65 * before.vertexToBox);
@@ -293,11 +293,11 @@ TEST_CASE("sharpen: a thin disc's rim, one row of vertices half-way up, gets a r
     Mesh kept = disc;
     const SharpenStats k = sharpenFeatures(kept, noSplit);
     MESSAGE("disc rim: crease to the mesh " << before << " -> " << creaseToMesh(split) << " (" << s.rimSplits
-                                                      << " rim vertices split, " << s.moved << " moved); without splits "
+                                                      << " rim vertices split, " << s.creaseVertices << " added on creases, " << s.moved << " moved); without splits "
                                                       << creaseToMesh(kept));
     CHECK(before > 1.45);
-    CHECK(s.rimSplits == 24);
-    CHECK(split.n_vertices() == disc.n_vertices() + 24);
+    CHECK(s.rimSplits >= 24);
+    CHECK(split.n_vertices() == disc.n_vertices() + s.rimSplits + s.creaseVertices);
     CHECK(k.rimSplits == 0);
     CHECK(creaseToMesh(kept) > 1.0); // without splits the mesh cannot reach both creases
     CHECK(creaseToMesh(split) < 0.25);

@@ -348,11 +348,12 @@ PipelineResult meshVolume(Volume& volume, const PipelineOptions& options)
         const SharpenStats ss = sharpenFeatures(r.mesh, so);
         r.sharpened = ss.moved;
         r.rimSplits = ss.rimSplits;
-        const bool changed = ss.largestMove > 0 || ss.rimSplits > 0;
+        r.creaseVertices = ss.creaseVertices;
+        const bool changed = ss.largestMove > 0 || ss.rimSplits > 0 || ss.creaseVertices > 0;
         const std::size_t after = changed ? findSelfIntersections(r.mesh).count() : 0;
         if (after > 0 && after > findSelfIntersections(kept).count()) { // a crossing added: the surface before
             r.mesh = std::move(kept);
-            r.sharpened = r.rimSplits = 0;
+            r.sharpened = r.rimSplits = r.creaseVertices = 0;
         }
     }
     analyseResult(r);
@@ -464,6 +465,7 @@ std::string pipelineStatsJson(const PipelineResult& r, const PipelineRecord& rec
                     {"malloc_huge_pages", mallocHugePages()},
                     {"sharpened_vertices", r.sharpened},
                     {"rim_splits", r.rimSplits},
+                    {"crease_vertices", r.creaseVertices},
                     {"splits", e.splits},
                     {"collapses", e.collapses},
                     {"flips", e.flips},

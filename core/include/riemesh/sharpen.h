@@ -15,9 +15,11 @@
 // whose vertices are split in two (SharpenOptions::rimAngle).
 // Only the vertices on a crease or a corner move, where the filtered normals and the image both
 // show one (SharpenOptions::featureAngle): fitting every vertex would flatten organic relief and
-// put points on coarsely sampled round parts. Phantom 100^3 (noise 0.5, seed 1) through vdb2mesh,
-// against the exact surface: mesh->true mean 0.146 -> 0.131, true->mesh 0.187 -> 0.144, Hausdorff
-// 2.50 -> 1.44 voxels (every vertex fitted: 0.125 / 0.149 / 1.31).
+// put points on coarsely sampled round parts. Each face's plane passes where the image puts the
+// surface, not through the face (planeSearch, anchorAgreement); a thin rim held by one row of
+// vertices is split into two (rimAngle); a crease cut off between two vertices gets one on it
+// (insertCreases). Phantom 100^3 (noise 0.5, seed 1) through vdb2mesh, against the exact surface:
+// mesh->true mean 0.146 -> 0.125, true->mesh 0.187 -> 0.134, Hausdorff 2.50 -> 1.25 voxels.
 #pragma once
 
 #include "riemesh/image.h"
@@ -77,14 +79,38 @@ struct SharpenOptions {
     /// side faces; the fit then puts them on the creases and the plate's corners. Without it the
     /// rim is one row of vertices half-way up, which misses both creases and every corner by half
     /// the plate's thickness (3-voxel plate: Hausdorff 2.1-2.7 voxels). Adds one vertex per rim
-    /// vertex (the Euler characteristic is unchanged). With an image, both fans' own normals in the
-    /// image must be as far apart. 180: never.
+    /// vertex (the Euler characteristic is unchanged). With an image, it must show a crease
+    /// (imageFeatureAngle) across both edges between the fans: across one only let two vertices of
+    /// the head MRI's surface split, and their faces crossed others. 180: never.
     double rimAngle = 120;
+    /// Each face's plane offset is the mean over it and its neighbours within samePlaneAngle
+    /// (degrees) of its filtered normal of their anchors' offsets, each weighted by its area times
+    /// (n . m)^anchorAgreement, m the image's own normal at the anchor: an anchor near a rounded
+    /// crease or corner, where the image turns away from the plane, lies inside the plane and
+    /// counts for little. Phantoms (noise 0.5, seeds 1-3): true->mesh cubes 0.139-0.146 ->
+    /// 0.128-0.134, plates 0.164-0.178 -> 0.147-0.164. 0: each face's own anchor.
+    double anchorAgreement = 8;
+    double samePlaneAngle = 8;
+    /// Chamfers: where a convex crease between two planes of the surface (or a corner of three)
+    /// passes over a face that lies on none of them, at least chamferDepth voxels out, a vertex is
+    /// added there (a 1-to-3 split of the face), after the fit: the model's edges run along a
+    /// crease only where its metric put them, and a crease between two of its vertices is cut
+    /// off. The planes: the face's neighbours' filtered normals in clusters more than twice
+    /// featureAngle apart; chamferAngle: the face's normal at least this far from a plane it lies
+    /// on. Concave creases get none: the clusters of a curved wall (the phantom's hole) make a
+    /// plane that is not there, which put a vertex 1.6 voxels into the cube.
+    bool insertCreases = true;
+    double chamferAngle = 20;
+    double chamferDepth = 0.5;
+    /// Passes of rim splitting and fitting: some rim vertices (a plate's corners) are split only
+    /// once the first pass has laid their faces on the plate's planes.
+    int passes = 2;
 };
 
 struct SharpenStats {
     std::size_t moved = 0;    ///< vertices that moved more than 1e-6 of the mean edge length
     std::size_t rimSplits = 0; ///< rim vertices split in two (see SharpenOptions::rimAngle)
+    std::size_t creaseVertices = 0; ///< vertices added on creases (SharpenOptions::insertCreases)
     double largestMove = 0;   ///< world units
     std::size_t refused = 0;  ///< vertex moves undone because a face would flip or collapse
 };
