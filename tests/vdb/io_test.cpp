@@ -24,7 +24,10 @@
 
 #include <doctest/doctest.h>
 
+#include <unistd.h>
+
 #include <algorithm>
+#include <chrono>
 #include <cmath>
 #include <cstdint>
 #include <cstdio>
@@ -344,6 +347,35 @@ TEST_CASE("vdb: a file that keeps OpenVDB's reader busy for minutes is refused a
     MESSAGE(message);
     CHECK(contains(message, "endless.vdb"));
     CHECK(contains(message, "corrupt or unreadable VDB file (the reader ran past its 4 s time limit)"));
+}
+
+TEST_CASE("vdb: a reader stuck asleep (a lock the fork copied held) is started again once, then refused, never waited for")
+{
+    // TBB is not fork-safe: a child can inherit a lock a worker thread of the parent held at the
+    // fork, and sleep on it forever (fuzz_vdb_read in CI: libFuzzer's 10 s timeout, the parent in
+    // waitpid). A child asleep without using the processor for 2 s is killed and started again;
+    // twice stuck, the read is refused. Here every child sleeps.
+    TempDir dir;
+    initialize();
+    auto g = openvdb::FloatGrid::create(0.0f);
+    g->setName("density");
+    {
+        openvdb::io::File file(dir / "small.vdb");
+        file.write({g});
+        file.close();
+    }
+    const auto start = std::chrono::steady_clock::now();
+    const std::string message = messageOf([&] {
+        detail::readGridInChild(dir / "small.vdb", std::uint64_t(64) << 20, [&]() -> openvdb::GridBase::ConstPtr {
+            for (;;) ::pause(); // asleep, no processor time
+        });
+    });
+    const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+    MESSAGE(message << " (" << seconds << " s)");
+    CHECK(contains(message, "small.vdb"));
+    CHECK(contains(message, "corrupt or unreadable VDB file (the reader stalled twice: no progress for 2 s)"));
+    CHECK(seconds > 4.0);  // two children, 2 s each
+    CHECK(seconds < 30.0); // not waited for forever
 }
 
 TEST_CASE("vdb: a reader that runs past its memory limit is refused with the limit named")

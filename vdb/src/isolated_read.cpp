@@ -15,6 +15,8 @@
 #include <unistd.h>
 
 #include <algorithm>
+#include <chrono>
+#include <thread>
 #include <atomic>
 #include <cctype>
 #include <cerrno>
@@ -391,6 +393,9 @@ void writeShortAnswer(int fd, Answer answer, const std::string& text)
     out.finish(h);
 }
 
+/// A child asleep this long without using the processor is stuck (waitForChild).
+constexpr double kStallSeconds = 2.0;
+
 /// The processor seconds the child may use to read a file of `bytes`: OpenVDB 10.0.1 believes the
 /// counts a file gives (a root node "with" 2^31 tiles reads past the end for minutes: fuzz_vdb_read
 /// finding), and a legitimate file reads at hundreds of MB per second, so a few seconds and one
@@ -485,6 +490,64 @@ struct FdCloser {
     int fd;
     ~FdCloser() { ::close(fd); }
 };
+
+/// How the wait for a child ended.
+enum class ChildEnd { Exited, Stalled, TimedOut };
+
+/// A process's scheduling state (R, S, D, ...) and processor time so far (clock ticks), from
+/// /proc/<pid>/stat; false if it cannot be read.
+bool processProgress(pid_t pid, char& state, long long& ticks)
+{
+    char path[64];
+    std::snprintf(path, sizeof path, "/proc/%d/stat", int(pid));
+    std::FILE* f = std::fopen(path, "r");
+    if (!f) return false;
+    char text[1024];
+    const std::size_t n = std::fread(text, 1, sizeof text - 1, f);
+    std::fclose(f);
+    text[n] = 0;
+    const char* close = std::strrchr(text, ')'); // the command name may hold spaces and parentheses
+    if (!close) return false;
+    long long utime = 0, stime = 0;
+    // state ppid pgrp session tty tpgid flags minflt cminflt majflt cmajflt utime stime
+    if (std::sscanf(close + 1, " %c %*d %*d %*d %*d %*d %*u %*u %*u %*u %*u %lld %lld", &state, &utime, &stime) != 3) return false;
+    ticks = utime + stime;
+    return true;
+}
+
+/// Waits for the child `pid`. A child asleep that has used no processor time for stallSeconds is
+/// stuck (TBB is not fork-safe: a lock one of the parent's worker threads held at the fork stays
+/// held in the child forever; a fuzz_vdb_read run in CI waited on one) and one that runs past
+/// wallSeconds is late: both are killed (SIGKILL) and reaped. `status` as from waitpid.
+ChildEnd waitForChild(pid_t pid, int& status, double stallSeconds, double wallSeconds)
+{
+    using Clock = std::chrono::steady_clock;
+    const auto start = Clock::now();
+    auto lastProgress = start;
+    long long lastTicks = -1;
+    auto end = [&](ChildEnd how) {
+        ::kill(pid, SIGKILL);
+        while (::waitpid(pid, &status, 0) < 0 && errno == EINTR) {}
+        return how;
+    };
+    for (int polls = 0;; ++polls) {
+        const pid_t done = ::waitpid(pid, &status, WNOHANG);
+        if (done == pid) return ChildEnd::Exited;
+        if (done < 0 && errno != EINTR) throw std::runtime_error(std::string("waitpid: ") + std::strerror(errno));
+        const auto now = Clock::now();
+        char state = '?';
+        long long ticks = 0;
+        if (!processProgress(pid, state, ticks) || state == 'R' || state == 'D' || ticks != lastTicks) {
+            lastProgress = now;
+            lastTicks = ticks;
+        } else if (std::chrono::duration<double>(now - lastProgress).count() > stallSeconds) {
+            return end(ChildEnd::Stalled);
+        }
+        if (std::chrono::duration<double>(now - start).count() > wallSeconds) return end(ChildEnd::TimedOut);
+        // Every millisecond at first (most reads take a few), then every 20.
+        std::this_thread::sleep_for(std::chrono::milliseconds(polls < 200 ? 1 : 20));
+    }
+}
 
 } // namespace
 
@@ -595,16 +658,33 @@ openvdb::FloatGrid::Ptr readGridInChild(const std::string& path, std::uint64_t m
     *allocationFailed = 0;
     struct stat file {};
     const std::uint64_t cpuSeconds = readSecondsFor(::stat(path.c_str(), &file) == 0 ? std::uint64_t(file.st_size) : 0);
-    const pid_t pid = ::fork();
-    if (pid < 0) throw fileError(path, std::string("cannot start the isolated reader: ") + std::strerror(errno));
-    if (pid == 0) childMain(fd, errFd, allocationFailed, path, memoryLimitBytes, cpuSeconds, read);
-    int status = 0;
-    while (::waitpid(pid, &status, 0) < 0) {
-        if (errno != EINTR) throw fileError(path, std::string("lost the isolated reader: ") + std::strerror(errno));
+    // A child that stalls (see waitForChild) is started again, once: the fork race is rare.
+    for (int attempt = 0;; ++attempt) {
+        const pid_t pid = ::fork();
+        if (pid < 0) throw fileError(path, std::string("cannot start the isolated reader: ") + std::strerror(errno));
+        if (pid == 0) childMain(fd, errFd, allocationFailed, path, memoryLimitBytes, cpuSeconds, read);
+        int status = 0;
+        ChildEnd end = ChildEnd::Exited;
+        try {
+            end = waitForChild(pid, status, kStallSeconds, 2.0 * double(cpuSeconds) + 10.0);
+        } catch (const std::exception& e) {
+            throw fileError(path, std::string("lost the isolated reader: ") + e.what());
+        }
+        if (end == ChildEnd::Stalled && attempt == 0) {
+            if (::ftruncate(fd, 0) != 0 || ::ftruncate(errFd, 0) != 0)
+                throw fileError(path, "cannot restart the isolated reader");
+            *allocationFailed = 0;
+            continue;
+        }
+        if (end == ChildEnd::Stalled)
+            throw unreadable(path, "the reader stalled twice: no progress for " + std::to_string(int(kStallSeconds)) + " s");
+        if (end == ChildEnd::TimedOut)
+            throw unreadable(path, "the reader ran past its " + std::to_string(2 * cpuSeconds + 10) + " s wall-clock limit");
+        if (!WIFEXITED(status) || WEXITSTATUS(status) != 0)
+            throw unreadable(path, describeChildEnd(status, *allocationFailed != 0, memoryLimitBytes, cpuSeconds,
+                                                    firstLineOf(errFd)));
+        break;
     }
-    if (!WIFEXITED(status) || WEXITSTATUS(status) != 0)
-        throw unreadable(path, describeChildEnd(status, *allocationFailed != 0, memoryLimitBytes, cpuSeconds,
-                                                firstLineOf(errFd)));
     struct stat st {};
     if (::fstat(fd, &st) != 0 || st.st_size <= 0) throw unreadable(path, "the reader gave no answer");
     const std::size_t size = std::size_t(st.st_size);
