@@ -200,12 +200,12 @@ std::size_t splitRims(Mesh& mesh, const SharpenOptions& o)
     for (auto v : mesh.vertices()) x[std::size_t(v.idx())] = position(mesh, v);
     FaceGeometry geo;
     measureFaces(mesh, x, geo);
+    std::vector<char> imageCrease; // first: where the image shows no crease, there is nothing to do
+    const bool imageGated = o.image && cosOf(o.imageFeatureAngle) < 1;
+    if (imageGated && !markImageCreases(mesh, x, geo, o, o.imageStep * o.image->voxelSize(), imageCrease)) return 0;
     const double meanEdge = meanEdgeLength(mesh);
     std::vector<Vec3> filtered, scratch;
     filterNormals(geo, faceRings(mesh), meanEdge, o, filtered, scratch);
-    std::vector<char> imageCrease;
-    const bool imageGated = o.image && cosOf(o.imageFeatureAngle) < 1;
-    if (imageGated && !markImageCreases(mesh, x, geo, o, o.imageStep * o.image->voxelSize(), imageCrease)) return 0;
 
     // The candidates, on the surface as it is.
     auto filteredNormal = [&](FaceHandle f) -> const Vec3& { return filtered[std::size_t(f.idx())]; };
@@ -287,14 +287,18 @@ std::vector<VertexHandle> insertCreaseVertices(Mesh& mesh, const SharpenOptions&
     FaceGeometry geo;
     measureFaces(mesh, x, geo);
     const double meanEdge = meanEdgeLength(mesh);
+    const bool imageGated = o.image && cosOf(o.imageFeatureAngle) < 1;
+    const double voxel = o.image ? o.image->voxelSize() : meanEdge;
+    const double imageCos = cosOf(o.imageFeatureAngle), step = o.imageStep * voxel;
+    if (imageGated) { // where the image shows no crease, there is nothing to do
+        std::vector<char> imageCrease;
+        if (!markImageCreases(mesh, x, geo, o, step, imageCrease)) return added;
+    }
     const FaceRings rings = faceRings(mesh);
     std::vector<Vec3> filtered, scratch, anchor;
     filterNormals(geo, rings, meanEdge, o, filtered, scratch);
     faceAnchors(geo, filtered, o, anchor);
     const double clusterCos = cosOf(2 * o.featureAngle), chamferCos = cosOf(o.chamferAngle);
-    const bool imageGated = o.image && cosOf(o.imageFeatureAngle) < 1;
-    const double voxel = o.image ? o.image->voxelSize() : meanEdge;
-    const double imageCos = cosOf(o.imageFeatureAngle), step = o.imageStep * voxel;
 
     struct Candidate {
         FaceHandle f;
@@ -576,6 +580,12 @@ SharpenStats sharpenFeatures(Mesh& mesh, const SharpenOptions& o)
     const std::size_t before = mesh.n_vertices();
     std::vector<Vec3> start(before);
     for (auto v : mesh.vertices()) start[std::size_t(v.idx())] = position(mesh, v);
+    if (o.image && cosOf(o.imageFeatureAngle) < 1) { // a surface where the image shows no crease is left as it is
+        FaceGeometry geo;
+        measureFaces(mesh, start, geo);
+        std::vector<char> imageCrease;
+        if (!markImageCreases(mesh, start, geo, o, o.imageStep * o.image->voxelSize(), imageCrease)) return stats;
+    }
     for (int pass = 0; pass < o.passes; ++pass) sharpenPass(mesh, o, stats);
     if (o.insertCreases) stats.creaseVertices = insertCreaseVertices(mesh, o).size();
     const double meanEdge = meanEdgeLength(mesh);
