@@ -61,6 +61,17 @@ CubeError cubeError(const Mesh& mesh, double h)
     return e;
 }
 
+/// Distance from `q` to the nearest of the mesh's triangles.
+double distanceToMesh(const Vec3& q, const Mesh& mesh)
+{
+    double nearest = 1e300;
+    for (auto f : mesh.faces()) {
+        const auto [va, vb, vc] = faceVertices(mesh, f);
+        nearest = std::min(nearest, pointTriangleDistanceSquared(q, position(mesh, va), position(mesh, vb), position(mesh, vc)));
+    }
+    return std::sqrt(nearest);
+}
+
 void checkValidAfter(const Mesh& mesh, int euler)
 {
     CHECK_MESH_OK(mesh);
@@ -273,12 +284,7 @@ TEST_CASE("sharpen: a thin disc's rim, one row of vertices half-way up, gets a r
             for (const double z : {-t, t}) {
                 const double a = 3.14159265358979323846 * i / 180;
                 const Vec3 q(R * std::cos(a), R * std::sin(a), z);
-                double nearest = 1e300;
-                for (auto f : mesh.faces()) {
-                    const auto [va, vb, vc] = faceVertices(mesh, f);
-                    nearest = std::min(nearest, pointTriangleDistanceSquared(q, position(mesh, va), position(mesh, vb), position(mesh, vc)));
-                }
-                worst = std::max(worst, std::sqrt(nearest));
+                worst = std::max(worst, distanceToMesh(q, mesh));
             }
         return worst;
     };
@@ -331,12 +337,7 @@ TEST_CASE("sharpen: a crease cut off between two vertices gets a vertex on it (c
                 q[axis] = t;
                 q[(axis + 1) % 3] = (e & 1) ? h : -h;
                 q[(axis + 2) % 3] = (e & 2) ? h : -h;
-                double nearest = 1e300;
-                for (auto f : mesh.faces()) {
-                    const auto [va, vb, vc] = faceVertices(mesh, f);
-                    nearest = std::min(nearest, pointTriangleDistanceSquared(q, position(mesh, va), position(mesh, vb), position(mesh, vc)));
-                }
-                worst = std::max(worst, std::sqrt(nearest));
+                worst = std::max(worst, distanceToMesh(q, mesh));
             }
         }
         return worst;
