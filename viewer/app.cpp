@@ -1,6 +1,7 @@
 #include "app.h"
 
 #include "riemesh/mesh_io.h"
+#include "riemesh/self_intersection.h"
 
 #include <imgui.h>
 
@@ -303,6 +304,7 @@ void App::reset()
         mMesh = Mesh();
         return;
     }
+    mShowSharpened = false;
     mEvolution = std::make_unique<Evolution>(mMesh, schedule(), *mMetric, o);
     mIterationBase = 0;
     mIteration = 0;
@@ -320,6 +322,7 @@ void App::reset()
 void App::advance(double budgetMs)
 {
     if (!mEvolution || !mPlaying || mEvolution->done()) return;
+    mShowSharpened = false; // evolving again: the model's own mesh
     const double start = nowSeconds();
     do {
         const IterationStats s = mEvolution->step();
@@ -349,7 +352,46 @@ void App::onStopped()
     }
     std::printf("riemesh: components=%d genus=%d merges=%d cuts=%d wall_seconds=%.3f\n", t.components, t.genus,
                 mMerges, mCuts, nowSeconds() - mWallStart);
+    if (r == StopReason::Converged && mParams.sharpen) sharpenConverged();
     std::fflush(stdout);
+}
+
+void App::setSharpen(bool on)
+{
+    mParams.sharpen = on;
+    const bool converged = mEvolution && mEvolution->reason() == StopReason::Converged;
+    if (on && converged && !mShowSharpened) {
+        sharpenConverged();
+    } else if (!on && mShowSharpened) {
+        mShowSharpened = false;
+        mMeshDirty = true;
+        mTopology = topologyOf(mMesh);
+    }
+}
+
+void App::sharpenConverged()
+{
+    // As vdb2mesh does: on a copy, kept only if it adds no crossing of the surface.
+    mSharpened = mMesh;
+    mSharpened.garbage_collection(); // (the evolution's deleted elements: counted by n_vertices())
+    SharpenOptions so;
+    const double h = mImage->voxelSize();
+    so.image = mImage.get();
+    so.iso = mParams.iso;
+    so.objectBrighter = mParams.objectBrighter;
+    so.maxMove = kSharpenMaxMoveVoxels * h;
+    so.maxOutside = kSharpenMaxOutsideVoxels * h;
+    const double start = nowSeconds();
+    mSharpenStats = sharpenFeatures(mSharpened, so);
+    const bool changed = mSharpenStats.largestMove > 0 || mSharpenStats.rimSplits > 0 || mSharpenStats.creaseVertices > 0;
+    const std::size_t after = changed ? findSelfIntersections(mSharpened).count() : 0;
+    if (after > 0 && after > findSelfIntersections(mMesh).count()) mSharpenStats = SharpenStats{}; // undone
+    mShowSharpened = mSharpenStats.moved > 0;
+    mMeshDirty = true;
+    mTopology = topologyOf(shownMesh());
+    std::printf("riemesh: sharpened moved=%zu rim_splits=%zu crease_vertices=%zu vertices=%zu seconds=%.3f\n",
+                mSharpenStats.moved, mSharpenStats.rimSplits, mSharpenStats.creaseVertices, mTopology.vertices,
+                nowSeconds() - start);
 }
 
 std::string App::runToConvergence()
@@ -371,9 +413,10 @@ void App::homeCamera()
 
 void App::frameCamera()
 {
-    if (mMesh.n_vertices() == 0) return homeCamera();
+    const Mesh& mesh = shownMesh();
+    if (mesh.n_vertices() == 0) return homeCamera();
     Box3 b;
-    for (auto v : mMesh.vertices()) b.extend(position(mMesh, v));
+    for (auto v : mesh.vertices()) b.extend(position(mesh, v));
     mScene.camera.target = b.center().cast<float>();
     mScene.camera.distance = float(std::max(1.0, 1.5 * b.diagonal().norm()));
 }
@@ -416,7 +459,8 @@ void App::rebuildMeshGeometry()
     // vertexNormal() and the per-vertex means of before, for a fraction of the time (12 -> 4.5 ms per
     // rebuild at 20k vertices in WebAssembly), which matters since it runs every frame while evolving.
     Scene& s = mScene;
-    const std::size_t nv = mMesh.n_vertices();
+    const Mesh& mesh = shownMesh();
+    const std::size_t nv = mesh.n_vertices();
     auto& pos = mScratchPositions;
     auto& nrm = mScratchNormals;
     auto& value = mScratchValues;
@@ -426,22 +470,22 @@ void App::rebuildMeshGeometry()
     nrm.assign(nv, Vec3::Zero());
     index.assign(nv, 0);
     std::uint32_t n = 0;
-    for (auto v : mMesh.vertices()) {
+    for (auto v : mesh.vertices()) {
         index[v.idx()] = n++;
-        pos[v.idx()] = position(mMesh, v);
+        pos[v.idx()] = position(mesh, v);
     }
 
-    s.triangles.resize(std::size_t(3) * mMesh.n_faces());
+    s.triangles.resize(std::size_t(3) * mesh.n_faces());
     s.section.clear();
     const Box3 bounds = mImage->bounds();
     const double plane = bounds.min()[mSliceAxis] + mSlicePosition * bounds.sizes()[mSliceAxis];
     std::size_t t = 0;
-    for (auto f : mMesh.faces()) {
+    for (auto f : mesh.faces()) {
         // fv_range order: to(h), to(next h), to(next next h) = from(h), with h the face's halfedge.
-        const auto h0 = mMesh.halfedge_handle(f);
-        const auto h1 = mMesh.next_halfedge_handle(h0);
-        const int iv[3] = {mMesh.to_vertex_handle(h0).idx(), mMesh.to_vertex_handle(h1).idx(),
-                           mMesh.from_vertex_handle(h0).idx()};
+        const auto h0 = mesh.halfedge_handle(f);
+        const auto h1 = mesh.next_halfedge_handle(h0);
+        const int iv[3] = {mesh.to_vertex_handle(h0).idx(), mesh.to_vertex_handle(h1).idx(),
+                           mesh.from_vertex_handle(h0).idx()};
         const Vec3 p[3] = {pos[iv[0]], pos[iv[1]], pos[iv[2]]};
         // vertexNormal(): sum of (b - a) x (c - a) with a = from(h), b = to(h), c = to(next h).
         const Vec3 fn = (p[0] - p[2]).cross(p[1] - p[2]);
@@ -465,7 +509,7 @@ void App::rebuildMeshGeometry()
 
     // Mean length of the edges around each vertex, measured with the metric at the vertex (metric edge
     // length) or Euclidean (local resolution), over delta.
-    s.edges.resize(std::size_t(2) * mMesh.n_edges());
+    s.edges.resize(std::size_t(2) * mesh.n_edges());
     std::size_t k = 0;
     const bool coloured = mColour != ColourMode::Shaded;
     if (coloured) {
@@ -473,12 +517,12 @@ void App::rebuildMeshGeometry()
         count.assign(nv, 0);
         if (mColour == ColourMode::MetricEdgeLength) {
             mScratchMetric.resize(nv);
-            for (auto v : mMesh.vertices()) mScratchMetric[v.idx()] = mMetric->at(pos[v.idx()]);
+            for (auto v : mesh.vertices()) mScratchMetric[v.idx()] = mMetric->at(pos[v.idx()]);
         }
     }
-    for (auto e : mMesh.edges()) {
-        const auto h = mMesh.halfedge_handle(e, 0);
-        const int a = mMesh.from_vertex_handle(h).idx(), b = mMesh.to_vertex_handle(h).idx();
+    for (auto e : mesh.edges()) {
+        const auto h = mesh.halfedge_handle(e, 0);
+        const int a = mesh.from_vertex_handle(h).idx(), b = mesh.to_vertex_handle(h).idx();
         s.edges[k++] = index[a];
         s.edges[k++] = index[b];
         if (!coloured) continue;
@@ -498,7 +542,7 @@ void App::rebuildMeshGeometry()
     const double delta = evolutionOptions().delta;
     float lo = 1e30f, hi = -1e30f;
     if (coloured)
-        for (auto v : mMesh.vertices()) {
+        for (auto v : mesh.vertices()) {
             const int i = v.idx();
             const float x = count[i] ? float(value[i] / count[i] / delta) : 0.f;
             value[i] = x;
@@ -513,7 +557,7 @@ void App::rebuildMeshGeometry()
     }
     s.vertices.resize(std::size_t(n) * 9);
     float* out = s.vertices.data();
-    for (auto v : mMesh.vertices()) {
+    for (auto v : mesh.vertices()) {
         const int i = v.idx();
         const Vec3& p = pos[i];
         const double len = nrm[i].norm();
@@ -580,7 +624,7 @@ void App::updateTopology()
     const int events = mMerges + mCuts;
     const bool running = mPlaying && mEvolution && !mEvolution->done();
     if (!running || events != mTopologyEvents || --mTopologyCountdown <= 0) {
-        mTopology = topologyOf(mMesh);
+        mTopology = topologyOf(shownMesh());
         mTopologyEvents = events;
         mTopologyCountdown = 10;
         return;
@@ -598,10 +642,11 @@ void App::updateStatistics()
     // Histogram of metric edge lengths / delta over [0, 1.5 zeta].
     const int bins = 40;
     mHistogram.assign(bins, 0.f);
-    if (!mMetric || mMesh.n_edges() == 0) return;
+    const Mesh& mesh = shownMesh();
+    if (!mMetric || mesh.n_edges() == 0) return;
     const double delta = evolutionOptions().delta, top = 1.5 * mParams.zeta;
-    for (auto e : mMesh.edges()) {
-        const double l = metricLength(*mMetric, mMesh, e) / delta;
+    for (auto e : mesh.edges()) {
+        const double l = metricLength(*mMetric, mesh, e) / delta;
         const int bin = std::clamp(int(l / top * bins), 0, bins - 1);
         mHistogram[bin] += 1.f;
     }
@@ -629,7 +674,7 @@ bool App::exportMesh(const std::string& extension)
     const std::string path = stem + extension;
 #endif
     try {
-        writeMesh(path, mMesh, "riemesh viewer, " + mVolumeName);
+        writeMesh(path, shownMesh(), "riemesh viewer, " + mVolumeName);
         mDownload = path;
         mMessage = "Wrote " + path;
     } catch (const std::exception& e) {
@@ -693,6 +738,9 @@ void App::drawPanels()
     ImGui::Text("vertices %zu  faces %zu", p.topology.vertices, p.topology.faces);
     ImGui::Text("components %d  genus %d", p.topology.components, p.topology.genus);
     ImGui::Text("merges %d  cuts %d  compute %.2f s", p.merges, p.cuts, p.computeSeconds);
+    if (mShowSharpened)
+        ImGui::Text("sharpened: %zu vertices moved, %zu added", mSharpenStats.moved,
+                    mSharpenStats.rimSplits + mSharpenStats.creaseVertices);
     // Refreshed twice a second: a number that changes every frame would make every frame a new image
     // (the page does not draw a frame that shows the same image as the last one).
     if (nowSeconds() - mShownAt >= 0.5) {
@@ -743,6 +791,14 @@ void App::drawPanels()
         changed |= ImGui::SliderScalar("curvature", ImGuiDataType_Double, &mParams.curvatureWeight, &wLo, &cHi, "%.3f");
         changed |= ImGui::SliderScalar("gradient", ImGuiDataType_Double, &mParams.gradientWeight, &wLo, &wHi, "%.2f");
         changed |= ImGui::Checkbox("object brighter than iso", &mParams.objectBrighter);
+        // Applies to the converged mesh as it is: no evolution again.
+        bool sharpen = mParams.sharpen;
+        if (ImGui::Checkbox("sharpen creases when converged", &sharpen)) setSharpen(sharpen);
+        if (mShowSharpened)
+            textDisabledWrapped((std::to_string(mSharpenStats.moved) + " vertices sharpened (" +
+                                 std::to_string(mSharpenStats.rimSplits) + " rim splits, " +
+                                 std::to_string(mSharpenStats.creaseVertices) + " on creases)")
+                                    .c_str());
         if (ImGui::Button("Defaults")) {
             metricChanged |= mParams.riemannian != mDefaults.riemannian || mParams.muScale != mDefaults.muScale;
             mParams = mDefaults;
@@ -794,6 +850,7 @@ void App::applyParameters(bool metricChanged)
         mIterationBase = mIteration;
         mEvolution.reset();
         rebuildMetric();
+        mShowSharpened = false;
         mEvolution = std::make_unique<Evolution>(mMesh, *mImage, *mMetric, evolutionOptions());
     } else {
         mEvolution->setOptions(evolutionOptions());
@@ -813,18 +870,24 @@ std::string App::stateJson() const
 {
     std::string name;
     for (char c : mVolumeName) name += (c == '"' || c == '\\') ? '_' : c;
-    char buffer[512];
+    char buffer[768];
     std::snprintf(buffer, sizeof buffer,
                   "{\"iteration\": %d, \"level\": %d, \"levels\": %d, \"vertices\": %zu, \"components\": %d, \"genus\": %d, \"playing\": %s, "
-                  "\"state\": \"%s\", \"computeSeconds\": %.4f, \"frameMs\": %.2f, \"cpuMs\": %.2f, \"merges\": %d, \"cuts\": %d, \"volume\": \"%s\"}",
+                  "\"state\": \"%s\", \"computeSeconds\": %.4f, \"frameMs\": %.2f, \"cpuMs\": %.2f, \"merges\": %d, \"cuts\": %d, \"sharpened\": %zu, \"volume\": \"%s\"}",
                   mIteration, mEvolution ? mEvolution->level() : 0, mEvolution ? mEvolution->levels() : 1,
                   mTopology.vertices, mTopology.components, mTopology.genus, mPlaying ? "true" : "false",
-                  stateName(), mComputeSeconds, mFrameInterval * 1e3, mLastFrameMs, mMerges, mCuts, name.c_str());
+                  stateName(), mComputeSeconds, mFrameInterval * 1e3, mLastFrameMs, mMerges, mCuts,
+                  mShowSharpened ? mSharpenStats.moved : std::size_t(0), name.c_str());
     return buffer;
 }
 
 bool App::setParameter(const std::string& name, double value)
 {
+    // Sharpening applies to the converged mesh as it is (the Model panel's checkbox).
+    if (name == "sharpen") {
+        setSharpen(value != 0);
+        return true;
+    }
     // Display settings (as in the Display panel): they do not touch the model.
     if (name == "colour") {
         mColour = ColourMode(std::clamp(int(value), 0, 2));

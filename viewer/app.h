@@ -9,6 +9,7 @@
 #include "riemesh/image.h"
 #include "riemesh/mesh.h"
 #include "riemesh/metric.h"
+#include "riemesh/sharpen.h"
 
 #include <Eigen/Core>
 
@@ -36,6 +37,7 @@ struct ModelParameters {
     double curvatureWeight = 0.05; ///< normal umbrella (smoothing)
     double gradientWeight = 0.0; ///< attraction to strong gradients
     int maxIterations = 3000;
+    bool sharpen = true;         ///< creases and corners put back once converged (as vdb2mesh)
 };
 
 /// What colours the mesh.
@@ -143,6 +145,14 @@ private:
     // the model
     ModelParameters mParams, mDefaults;
     Mesh mMesh;
+    /// The converged mesh with its creases and corners put back (sharpenFeatures, as vdb2mesh does),
+    /// shown, counted and exported instead of mMesh until the model evolves again.
+    Mesh mSharpened;
+    bool mShowSharpened = false;
+    SharpenStats mSharpenStats;
+    const Mesh& shownMesh() const { return mShowSharpened ? mSharpened : mMesh; }
+    void sharpenConverged();
+    void setSharpen(bool on); ///< the option, applied at once to a converged model
     std::unique_ptr<Evolution> mEvolution;
     bool mPlaying = true;
     bool mReported = false;

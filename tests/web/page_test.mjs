@@ -113,6 +113,25 @@ try {
   check('the page opens on the demo volume', !!loaded, loaded || consoleLines.filter((l) => l.includes('riemesh')).join(' | '));
 
   await sleep(500); // a few frames with the final mesh
+  // Once converged, creases and corners are put back as vdb2mesh does (its default): the phantom
+  // is a cube, so some vertices move, and the state's count is the mesh shown (and downloaded).
+  const sharpenedLine = consoleLines.map((l) => l.replace(/^\[\w+\] /, '')).find((l) => l.startsWith('riemesh: sharpened'));
+  const sharpenedMatch = sharpenedLine && /moved=(\d+) rim_splits=(\d+) crease_vertices=(\d+) vertices=(\d+)/.exec(sharpenedLine);
+  const afterSharpen = await page.evaluate(() => window.riemesh.state());
+  check('the converged phantom is sharpened, and the state counts the sharpened mesh',
+        !!sharpenedMatch && Number(sharpenedMatch[1]) > 0 && afterSharpen.sharpened === Number(sharpenedMatch[1]) &&
+          afterSharpen.vertices === Number(sharpenedMatch[4]),
+        `${sharpenedLine || 'no sharpened line'}; state: ${afterSharpen.sharpened} sharpened, ${afterSharpen.vertices} vertices`);
+  await page.evaluate(() => window.riemesh.set('sharpen', 0));
+  const unsharpened = await page.evaluate(() => window.riemesh.state());
+  await page.evaluate(() => window.riemesh.set('sharpen', 1));
+  const resharpened = await page.evaluate(() => window.riemesh.state());
+  const convergedVertices = line ? Number(converged.exec(line)[2]) : -1;
+  check('riemesh.set(\'sharpen\', 0) shows the converged mesh as it was, 1 sharpens it again',
+        unsharpened.sharpened === 0 && unsharpened.vertices === convergedVertices && unsharpened.state === 'converged' &&
+          resharpened.sharpened === afterSharpen.sharpened && resharpened.vertices === afterSharpen.vertices,
+        `off: ${unsharpened.sharpened} sharpened, ${unsharpened.vertices} vertices (converged: ${convergedVertices}); ` +
+          `on: ${resharpened.sharpened}, ${resharpened.vertices}`);
   const shot = await page.screenshot({ path: path.join(outDir, 'page.png') });
   // The 3D view right of the ImGui panel.
   const view = await analyse(context, shot, { x: 400, y: 40, width: 860, height: 740 });

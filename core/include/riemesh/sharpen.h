@@ -107,6 +107,12 @@ struct SharpenOptions {
     int passes = 2;
 };
 
+/// The bounds vdb2mesh and the viewer give a vertex (SharpenOptions::maxMove, maxOutside), in
+/// voxels: a blurred corner of a cube lies ~1.4 voxels inside the image's isosurface, the fins a
+/// thin plate's rim grows without the second bound 2-2.6 voxels beyond the rim.
+inline constexpr double kSharpenMaxMoveVoxels = 2.5;
+inline constexpr double kSharpenMaxOutsideVoxels = 1.5;
+
 struct SharpenStats {
     std::size_t moved = 0;    ///< vertices that moved more than 1e-6 of the mean edge length
     std::size_t rimSplits = 0; ///< rim vertices split in two (see SharpenOptions::rimAngle)

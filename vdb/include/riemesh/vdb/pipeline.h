@@ -10,6 +10,8 @@
 //   writeMesh("phantom.ply", result.mesh);
 #pragma once
 
+#include "riemesh/sharpen.h"
+
 #include "riemesh/evolution.h"
 #include "riemesh/mesh.h"
 #include "riemesh/vdb/volume.h"
@@ -31,11 +33,8 @@ inline constexpr double kMuMax = 9.0;
 inline constexpr double kSigma = 1.0;      // voxels
 inline constexpr double kRho = 2.0;        // voxels
 inline constexpr double kTangentialGain = 4.0;
-inline constexpr double kSharpenMaxMove = 2.5; // voxels, --sharpen
-/// --sharpen moves no vertex to where the smoothed image puts it farther outside than this (voxels,
-/// SharpenOptions::maxOutside): a blurred corner of a cube lies ~1.4 voxels inside the image's
-/// isosurface, the fins a thin plate's rim grows without it 2-2.6 voxels beyond the rim.
-inline constexpr double kSharpenMaxOutside = 1.5;
+inline constexpr double kSharpenMaxMove = kSharpenMaxMoveVoxels; // voxels (riemesh/sharpen.h)
+inline constexpr double kSharpenMaxOutside = kSharpenMaxOutsideVoxels;
 /// The glibc tunable that has malloc advise its memory for transparent huge pages: vdb2mesh
 /// restarts itself with it (see vdb/apps/vdb2mesh.cpp), the stats say whether it was in effect.
 inline constexpr const char* kHugePageMallocTunable = "glibc.malloc.hugetlb=1";
