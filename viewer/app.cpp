@@ -1,7 +1,6 @@
 #include "app.h"
 
 #include "riemesh/mesh_io.h"
-#include "riemesh/self_intersection.h"
 
 #include <imgui.h>
 
@@ -382,10 +381,7 @@ void App::sharpenConverged()
     so.maxMove = kSharpenMaxMoveVoxels * h;
     so.maxOutside = kSharpenMaxOutsideVoxels * h;
     const double start = nowSeconds();
-    mSharpenStats = sharpenFeatures(mSharpened, so);
-    const bool changed = mSharpenStats.largestMove > 0 || mSharpenStats.rimSplits > 0 || mSharpenStats.creaseVertices > 0;
-    const std::size_t after = changed ? findSelfIntersections(mSharpened).count() : 0;
-    if (after > 0 && after > findSelfIntersections(mMesh).count()) mSharpenStats = SharpenStats{}; // undone
+    mSharpenStats = sharpenFeaturesEmbedded(mSharpened, so);
     mShowSharpened = mSharpenStats.moved > 0;
     mMeshDirty = true;
     mTopology = topologyOf(shownMesh());

@@ -1,5 +1,7 @@
 #include "riemesh/sharpen.h"
 
+#include "riemesh/self_intersection.h"
+
 #include "detail/parallel.h"
 
 #include <Eigen/Dense>
@@ -91,6 +93,14 @@ void filterNormals(const FaceGeometry& geo, const FaceRings& rings, double meanE
 
 double cosOf(double degrees) { return degrees > 0 ? std::cos(degrees * 3.14159265358979323846 / 180.0) : 1.0; }
 
+/// The unit gradient of the image in its voxel coordinates (zero where it vanishes).
+Vec3 unitIndexGradient(const ScalarImage& image, const Vec3& q)
+{
+    const Vec3 g = image.indexGradient(q);
+    const double len = g.norm();
+    return len > 0 ? Vec3(g / len) : Vec3::Zero();
+}
+
 /// The image's say, edge by edge (SharpenOptions::imageFeatureAngle): its own normals `step` (world
 /// units) into either face from the edge's middle, each side's the mean of three samples along the
 /// edge (the noise a single gradient carries, tens of degrees at noise 0.5, otherwise passes for a
@@ -100,11 +110,6 @@ bool markImageCreases(const Mesh& mesh, const std::vector<Vec3>& x, const FaceGe
 {
     const double imageCos = cosOf(o.imageFeatureAngle);
     crease.assign(mesh.n_edges(), 0);
-    auto imageNormal = [&](const Vec3& q) {
-        const Vec3 g = o.image->indexGradient(q);
-        const double len = g.norm();
-        return len > 0 ? Vec3(g / len) : Vec3::Zero();
-    };
     detail::parallelFor(0, mesh.n_edges(), 1024, [&](std::size_t e) {
         const EdgeHandle edge{int(e)};
         if (mesh.status(edge).deleted()) return;
@@ -118,7 +123,7 @@ bool markImageCreases(const Mesh& mesh, const std::vector<Vec3>& x, const FaceGe
         if (!(ta.norm() > 0) || !(tb.norm() > 0)) return;
         auto sideNormal = [&](const Vec3& t) {
             Vec3 sum = Vec3::Zero();
-            for (int k = -1; k <= 1; ++k) sum += imageNormal(m + 0.25 * double(k) * along + step * t.normalized());
+            for (int k = -1; k <= 1; ++k) sum += unitIndexGradient(*o.image, m + 0.25 * double(k) * along + step * t.normalized());
             const double len = sum.norm();
             return len > 0 ? Vec3(sum / len) : Vec3::Zero();
         };
@@ -173,11 +178,10 @@ struct Rim {
 /// of at least two faces each.
 template <class NormalOf>
 bool rimFans(const Mesh& mesh, VertexHandle v, const Vec3& a, const Vec3& b, NormalOf normal, VertexHandle& vl,
-             VertexHandle& vr, int& countA)
+             VertexHandle& vr)
 {
     const Vec3 axis = a - b;
-    int boundaries = 0, faces = 0;
-    countA = 0;
+    int boundaries = 0, faces = 0, countA = 0;
     for (auto h : mesh.voh_range(v)) {
         const FaceHandle left = mesh.face_handle(h), right = mesh.face_handle(mesh.opposite_halfedge_handle(h));
         if (!left.is_valid() || !right.is_valid()) return false;
@@ -219,8 +223,7 @@ std::size_t splitRims(Mesh& mesh, const SharpenOptions& o)
                 if (const double d = filteredNormal(f).dot(filteredNormal(g)); d < lowest) lowest = d, a = filteredNormal(f), b = filteredNormal(g);
         if (!(lowest < rimCos)) continue;
         Rim r{v, VertexHandle(), VertexHandle(), a, b};
-        int countA = 0;
-        if (!rimFans(mesh, v, a, b, filteredNormal, r.vl, r.vr, countA)) continue;
+        if (!rimFans(mesh, v, a, b, filteredNormal, r.vl, r.vr)) continue;
         // Each fan's mean normal; the fans must each be nearly flat and face apart.
         Vec3 ma = Vec3::Zero(), mb = Vec3::Zero();
         for (auto f : mesh.vf_range(v)) (filteredNormal(f).dot(a - b) >= 0 ? ma : mb) += geo.area[std::size_t(f.idx())] * filteredNormal(f);
@@ -244,8 +247,7 @@ std::size_t splitRims(Mesh& mesh, const SharpenOptions& o)
     };
     for (const Rim& r : rims) {
         VertexHandle vl, vr;
-        int countA = 0;
-        if (!rimFans(mesh, r.v, r.a, r.b, currentNormal, vl, vr, countA)) continue;
+        if (!rimFans(mesh, r.v, r.a, r.b, currentNormal, vl, vr)) continue;
         const Vec3 p = position(mesh, r.v);
         double shortest = std::numeric_limits<double>::infinity();
         for (auto w : mesh.vv_range(r.v)) shortest = std::min(shortest, (position(mesh, w) - p).norm());
@@ -262,14 +264,6 @@ std::size_t splitRims(Mesh& mesh, const SharpenOptions& o)
         ++splits;
     }
     return splits;
-}
-
-/// The unit gradient of the image in its voxel coordinates (zero where it vanishes).
-Vec3 unitIndexGradient(const ScalarImage& image, const Vec3& q)
-{
-    const Vec3 g = image.indexGradient(q);
-    const double len = g.norm();
-    return len > 0 ? Vec3(g / len) : Vec3::Zero();
 }
 
 /// Chamfers cut across a crease (SharpenOptions::insertCreases): a face whose neighbours' filtered
@@ -397,7 +391,7 @@ std::vector<VertexHandle> insertCreaseVertices(Mesh& mesh, const SharpenOptions&
         found.push_back({f, p, depth});
     }
     // Deepest first; none within half a mean edge of another.
-    std::sort(found.begin(), found.end(), [](const Candidate& l, const Candidate& r) { return std::abs(l.depth) > std::abs(r.depth); });
+    std::sort(found.begin(), found.end(), [](const Candidate& l, const Candidate& r) { return l.depth > r.depth; });
     std::vector<Vec3> placed;
     for (const Candidate& k : found) {
         bool near = false;
@@ -600,6 +594,17 @@ SharpenStats sharpenFeatures(Mesh& mesh, const SharpenOptions& o)
         stats.largestMove = std::max(stats.largestMove, move);
     }
     return stats;
+}
+
+SharpenStats sharpenFeaturesEmbedded(Mesh& mesh, const SharpenOptions& options)
+{
+    Mesh before = mesh; // (sharpening may split vertices and faces)
+    const SharpenStats stats = sharpenFeatures(mesh, options);
+    const bool changed = stats.largestMove > 0 || stats.rimSplits > 0 || stats.creaseVertices > 0;
+    const std::size_t after = changed ? findSelfIntersections(mesh).count() : 0;
+    if (after == 0 || after <= findSelfIntersections(before).count()) return stats;
+    mesh = std::move(before); // a crossing added: the surface as it was
+    return {};
 }
 
 } // namespace riemesh

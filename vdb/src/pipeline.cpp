@@ -333,28 +333,17 @@ PipelineResult meshVolume(Volume& volume, const PipelineOptions& options)
             << " voxels and was removed; no output written (lower --delta or --smooth)";
         throw PipelineInputError(msg.str());
     }
-    if (options.sharpen) {
-        // Kept only if it adds no crossing: the moves are small (a few voxels at most), but nothing
-        // checks them against the surface's other sheets. The surface is searched for crossings
-        // only when a vertex moved, and the one before only when the sharpened one has some (on by
-        // default, sharpening would otherwise add two searches of the whole surface to every run).
-        Mesh kept = r.mesh; // (sharpening may split the vertices of thin rims)
+    if (options.sharpen) { // kept only if it adds no crossing (sharpenFeaturesEmbedded)
         SharpenOptions so;
         so.maxMove = kSharpenMaxMove * h;
         so.image = &image;
         so.iso = iso;
         so.objectBrighter = objectBrighter;
         so.maxOutside = kSharpenMaxOutside * h;
-        const SharpenStats ss = sharpenFeatures(r.mesh, so);
+        const SharpenStats ss = sharpenFeaturesEmbedded(r.mesh, so);
         r.sharpened = ss.moved;
         r.rimSplits = ss.rimSplits;
         r.creaseVertices = ss.creaseVertices;
-        const bool changed = ss.largestMove > 0 || ss.rimSplits > 0 || ss.creaseVertices > 0;
-        const std::size_t after = changed ? findSelfIntersections(r.mesh).count() : 0;
-        if (after > 0 && after > findSelfIntersections(kept).count()) { // a crossing added: the surface before
-            r.mesh = std::move(kept);
-            r.sharpened = r.rimSplits = r.creaseVertices = 0;
-        }
     }
     analyseResult(r);
     return r;

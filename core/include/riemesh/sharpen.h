@@ -126,4 +126,11 @@ struct SharpenStats {
 /// rim's vertices are split (SharpenOptions::rimAngle).
 SharpenStats sharpenFeatures(Mesh& mesh, const SharpenOptions& options = {});
 
+/// sharpenFeatures, kept only if it adds no crossing of the surface (vdb2mesh, the viewer): the
+/// moves are small, a few voxels at most, but nothing checks them against the surface's other
+/// sheets. The surface is searched for crossings only when something changed, and the one before
+/// only when the sharpened one has some (on by default, sharpening would otherwise add two searches
+/// of the whole surface to every run). Undone: `mesh` as it was, and the stats all zero.
+SharpenStats sharpenFeaturesEmbedded(Mesh& mesh, const SharpenOptions& options = {});
+
 } // namespace riemesh
