@@ -373,15 +373,8 @@ void App::sharpenConverged()
     // As vdb2mesh does: on a copy, kept only if it adds no crossing of the surface.
     mSharpened = mMesh;
     mSharpened.garbage_collection(); // (the evolution's deleted elements: counted by n_vertices())
-    SharpenOptions so;
-    const double h = mImage->voxelSize();
-    so.image = mImage.get();
-    so.iso = mParams.iso;
-    so.objectBrighter = mParams.objectBrighter;
-    so.maxMove = kSharpenMaxMoveVoxels * h;
-    so.maxOutside = kSharpenMaxOutsideVoxels * h;
     const double start = nowSeconds();
-    mSharpenStats = sharpenFeaturesEmbedded(mSharpened, so);
+    mSharpenStats = sharpenFeaturesEmbedded(mSharpened, imageSharpenOptions(*mImage, mParams.iso, mParams.objectBrighter));
     mShowSharpened = mSharpenStats.moved > 0;
     mMeshDirty = true;
     mTopology = topologyOf(shownMesh());

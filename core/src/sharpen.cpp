@@ -350,7 +350,14 @@ std::vector<VertexHandle> insertCreaseVertices(Mesh& mesh, const SharpenOptions&
         for (int i = 0; i < count; ++i) {
             if (!(weight[i] > 0) || !(normal[i].norm() > 0)) continue;
             normal[i].normalize(), point[i] /= weight[i];
-            if (n.dot(normal[i]) > chamferCos && std::abs(normal[i].dot(c - point[i])) < 0.5 * o.chamferDepth * voxel) onPlane = true;
+            // A plane of the face's own orientation is one it lies on, or one it is parallel to (a
+            // chamfer's own cluster: its plane is anchored outside it, at the image's isosurface,
+            // and crossing it with the others put the crease within a fraction of a voxel of the
+            // face, so a plate's corner was never found); never one it cuts across.
+            if (n.dot(normal[i]) > chamferCos) {
+                if (std::abs(normal[i].dot(c - point[i])) < 0.5 * o.chamferDepth * voxel) onPlane = true;
+                continue;
+            }
             if (n.dot(normal[i]) > 0.2 && planes < 3) used[planes++] = i;
         }
         if (onPlane || planes < 2) continue;
@@ -523,12 +530,13 @@ void sharpenPass(Mesh& mesh, const SharpenOptions& o, SharpenStats& stats)
             const Vec3 off = y - start[i];
             const double limit = std::min(o.maxMove, o.maxMoveEdges * vertexEdge[i]);
             if (off.norm() > limit) y = start[i] + off * (limit / off.norm());
-            if (o.image) { // back toward where the round started, while the image says far outside
-                auto outside = [&](const Vec3& p) {
-                    return (o.objectBrighter ? 1.0 : -1.0) * isoDistance(*o.image, p, o.iso, 1e-12) < -o.maxOutside;
+            if (o.image) { // back toward where the round started, while the image says too far out or in
+                auto astray = [&](const Vec3& p) {
+                    const double d = (o.objectBrighter ? 1.0 : -1.0) * isoDistance(*o.image, p, o.iso, 1e-12);
+                    return d < -o.maxOutside || d > o.maxInside;
                 };
-                for (int k = 0; k < 4 && outside(y); ++k) y = x[i] + 0.5 * (y - x[i]);
-                if (outside(y)) y = x[i];
+                for (int k = 0; k < 4 && astray(y); ++k) y = x[i] + 0.5 * (y - x[i]);
+                if (astray(y)) y = x[i];
             }
             moved[i] = y;
         }
@@ -594,6 +602,19 @@ SharpenStats sharpenFeatures(Mesh& mesh, const SharpenOptions& o)
         stats.largestMove = std::max(stats.largestMove, move);
     }
     return stats;
+}
+
+SharpenOptions imageSharpenOptions(const ScalarImage& image, double iso, bool objectBrighter)
+{
+    SharpenOptions o;
+    const double h = image.voxelSize();
+    o.image = &image;
+    o.iso = iso;
+    o.objectBrighter = objectBrighter;
+    o.maxMove = kSharpenMaxMoveVoxels * h;
+    o.maxOutside = kSharpenMaxOutsideVoxels * h;
+    o.maxInside = kSharpenMaxInsideVoxels * h;
+    return o;
 }
 
 SharpenStats sharpenFeaturesEmbedded(Mesh& mesh, const SharpenOptions& options)

@@ -334,13 +334,7 @@ PipelineResult meshVolume(Volume& volume, const PipelineOptions& options)
         throw PipelineInputError(msg.str());
     }
     if (options.sharpen) { // kept only if it adds no crossing (sharpenFeaturesEmbedded)
-        SharpenOptions so;
-        so.maxMove = kSharpenMaxMove * h;
-        so.image = &image;
-        so.iso = iso;
-        so.objectBrighter = objectBrighter;
-        so.maxOutside = kSharpenMaxOutside * h;
-        const SharpenStats ss = sharpenFeaturesEmbedded(r.mesh, so);
+        const SharpenStats ss = sharpenFeaturesEmbedded(r.mesh, imageSharpenOptions(image, iso, objectBrighter));
         r.sharpened = ss.moved;
         r.rimSplits = ss.rimSplits;
         r.creaseVertices = ss.creaseVertices;

@@ -33,8 +33,6 @@ inline constexpr double kMuMax = 9.0;
 inline constexpr double kSigma = 1.0;      // voxels
 inline constexpr double kRho = 2.0;        // voxels
 inline constexpr double kTangentialGain = 4.0;
-inline constexpr double kSharpenMaxMove = kSharpenMaxMoveVoxels; // voxels (riemesh/sharpen.h)
-inline constexpr double kSharpenMaxOutside = kSharpenMaxOutsideVoxels;
 /// The glibc tunable that has malloc advise its memory for transparent huge pages: vdb2mesh
 /// restarts itself with it (see vdb/apps/vdb2mesh.cpp), the stats say whether it was in effect.
 inline constexpr const char* kHugePageMallocTunable = "glibc.malloc.hugetlb=1";
@@ -97,7 +95,7 @@ struct PipelineOptions {
     bool intersectionFree = false;
     /// Put creases and corners back on the converged surface (riemesh/sharpen.h; --no-sharpen turns
     /// it off): only the vertices on a crease or a corner move (SharpenOptions::featureAngle), so that
-    /// the rounded relief of organic shapes stays. A vertex moves at most kSharpenMaxMove voxels;
+    /// the rounded relief of organic shapes stays. A vertex moves at most kSharpenMaxMoveVoxels voxels;
     /// the result is kept only if it crosses itself no more than before.
     bool sharpen = true;
     /// The external force samples the image at the faces' centroids as well as at the vertices
