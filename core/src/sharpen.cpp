@@ -266,6 +266,33 @@ std::size_t splitRims(Mesh& mesh, const SharpenOptions& o)
     return splits;
 }
 
+/// From `from` (inside the object), along +-dir up to `reach`, at steps of `h`: the nearer point
+/// where the image says outside (interpolated) and the direction taken there; false if neither
+/// way reaches one, or `from` is not inside.
+bool creaseEnd(const ScalarImage& image, double iso, bool objectBrighter, const Vec3& from, const Vec3& dir, double reach,
+               double h, Vec3& end, Vec3& across)
+{
+    const double sign = objectBrighter ? 1.0 : -1.0;
+    auto inside = [&](const Vec3& q) { return sign * (image.value(q) - iso); };
+    if (!(inside(from) > 0)) return false;
+    double best = std::numeric_limits<double>::infinity();
+    for (const double way : {1.0, -1.0}) {
+        double before = inside(from);
+        for (double t = h; t <= reach + 1e-9 * h && t < best; t += h) {
+            const double now = inside(from + way * t * dir);
+            if (now > 0) {
+                before = now;
+                continue;
+            }
+            best = t - h + h * before / (before - now);
+            end = from + way * best * dir;
+            across = way * dir;
+            break;
+        }
+    }
+    return std::isfinite(best);
+}
+
 /// Chamfers cut across a crease (SharpenOptions::insertCreases): a face whose neighbours' filtered
 /// normals make two planes more than twice featureAngle apart, which lies on neither (its own
 /// normal more than chamferAngle from both) and whose crease, the planes' intersection, passes over
@@ -293,6 +320,7 @@ std::vector<VertexHandle> insertCreaseVertices(Mesh& mesh, const SharpenOptions&
     filterNormals(geo, rings, meanEdge, o, filtered, scratch);
     faceAnchors(geo, filtered, o, anchor);
     const double clusterCos = cosOf(2 * o.featureAngle), chamferCos = cosOf(o.chamferAngle);
+    const double ownCos = std::min(chamferCos, cosOf(o.ownPlaneAngle));
 
     struct Candidate {
         FaceHandle f;
@@ -353,11 +381,11 @@ std::vector<VertexHandle> insertCreaseVertices(Mesh& mesh, const SharpenOptions&
             // A plane of the face's own orientation is one it lies on, or one it is parallel to (a
             // chamfer's own cluster: its plane is anchored outside it, at the image's isosurface,
             // and crossing it with the others put the crease within a fraction of a voxel of the
-            // face, so a plate's corner was never found); never one it cuts across.
-            if (n.dot(normal[i]) > chamferCos) {
-                if (std::abs(normal[i].dot(c - point[i])) < 0.5 * o.chamferDepth * voxel) onPlane = true;
-                continue;
-            }
+            // face, so a plate's corner was never found); never one it cuts across
+            // (ownPlaneAngle).
+            if (n.dot(normal[i]) > chamferCos && std::abs(normal[i].dot(c - point[i])) < 0.5 * o.chamferDepth * voxel)
+                onPlane = true;
+            if (n.dot(normal[i]) > ownCos) continue;
             if (n.dot(normal[i]) > 0.2 && planes < 3) used[planes++] = i;
         }
         if (onPlane || planes < 2) continue;
@@ -373,19 +401,33 @@ std::vector<VertexHandle> insertCreaseVertices(Mesh& mesh, const SharpenOptions&
         } else if (std::abs(M.determinant()) < 0.3) { // three planes meeting well in one point
             continue;
         }
-        const Vec3 p = M.colPivHouseholderQr().solve(rhs);
+        Vec3 p = M.colPivHouseholderQr().solve(rhs);
         if (!std::isfinite(p.x()) || !std::isfinite(p.y()) || !std::isfinite(p.z())) continue;
+        // Over the face: its projection inside the triangle.
+        const auto [va, vb, vc] = faceVertices(mesh, f);
+        const Vec3 &A = x[std::size_t(va.idx())], &B = x[std::size_t(vb.idx())], &C = x[std::size_t(vc.idx())];
+        const double area2 = (B - A).cross(C - A).dot(n);
+        auto over = [&](const Vec3& y) {
+            const Vec3 q = y - n.dot(y - c) * n;
+            const double u = (C - B).cross(q - B).dot(n) / area2, v = (A - C).cross(q - C).dot(n) / area2;
+            return u >= 0 && v >= 0 && u + v <= 1;
+        };
+        if (planes == 2 && o.image && o.cornerInset > 0) { // where the crease ends, if it ends over the face
+            Vec3 end = Vec3::Zero(), across = Vec3::Zero();
+            if (creaseEnd(*o.image, o.iso, o.objectBrighter, p - o.cornerInset * voxel * (normal[used[0]] + normal[used[1]]).normalized(),
+                          dir, meanEdge, 0.25 * voxel, end, across)) {
+                M.row(2) = across.transpose(), rhs[2] = across.dot(end);
+                const Vec3 corner = M.colPivHouseholderQr().solve(rhs);
+                if (corner.allFinite() && over(corner) && n.dot(corner - c) >= o.chamferDepth * voxel &&
+                    (corner - c).norm() <= meanEdge)
+                    p = corner;
+            }
+        }
         const double depth = n.dot(p - c);
         if (!(depth >= o.chamferDepth * voxel) || (p - c).norm() > meanEdge) continue; // convex creases only (see insertCreases)
         const Vec3 na = normal[used[0]], nb = normal[used[1]];
         if (planes == 3) dir = na.cross(nb).normalized();
-        // Over the face: its projection inside the triangle.
-        const auto [va, vb, vc] = faceVertices(mesh, f);
-        const Vec3 &A = x[std::size_t(va.idx())], &B = x[std::size_t(vb.idx())], &C = x[std::size_t(vc.idx())];
-        const Vec3 q = p - depth * n;
-        const double area2 = (B - A).cross(C - A).dot(n);
-        const double u = (C - B).cross(q - B).dot(n) / area2, v = (A - C).cross(q - C).dot(n) / area2;
-        if (!(u >= 0 && v >= 0 && u + v <= 1)) continue;
+        if (!over(p)) continue;
         if (imageGated) { // the image's normals a little way into either plane from p
             auto into = [&](const Vec3& nPlane) {
                 const Vec3 t = nPlane.cross(dir).normalized();
@@ -408,6 +450,79 @@ std::vector<VertexHandle> insertCreaseVertices(Mesh& mesh, const SharpenOptions&
         placed.push_back(k.p);
     }
     return added;
+}
+
+/// SharpenOptions::alignCreases: the edges of the faces around `seeds` flipped, in sweeps, while a
+/// flip lowers the sum of length x |dihedral angle| over the edges of its two faces. A flip is
+/// made only if its faces keep their orientation (each new normal within 90 degrees of the old
+/// faces' mean), do not fold onto each other (dihedral under 120 degrees) and have no angle under
+/// half the smallest of the old faces' (nor under 10 degrees). Returns the flips made.
+std::size_t alignCreaseEdges(Mesh& mesh, const std::vector<VertexHandle>& seeds)
+{
+    std::vector<EdgeHandle> edges;
+    for (VertexHandle v : seeds)
+        for (auto f : mesh.vf_range(v))
+            for (auto e : mesh.fe_range(f)) edges.push_back(e);
+    std::sort(edges.begin(), edges.end(), [](EdgeHandle l, EdgeHandle r) { return l.idx() < r.idx(); });
+    edges.erase(std::unique(edges.begin(), edges.end()), edges.end());
+    const double scale = meanEdgeLength(mesh);
+    auto at = [&](VertexHandle v) { return position(mesh, v); };
+    auto normalOf = [](const Vec3& a, const Vec3& b, const Vec3& c) {
+        const Vec3 n = (b - a).cross(c - a);
+        const double len = n.norm();
+        return len > 0 ? Vec3(n / len) : Vec3(Vec3::Zero());
+    };
+    auto bend = [](const Vec3& n, const Vec3& m) { return std::acos(std::clamp(n.dot(m), -1.0, 1.0)); };
+    auto smallestAngle = [](const Vec3& a, const Vec3& b, const Vec3& c) {
+        const Vec3 p[3] = {a, b, c};
+        double smallest = M_PI;
+        for (int k = 0; k < 3; ++k) {
+            const Vec3 u = p[(k + 1) % 3] - p[k], w = p[(k + 2) % 3] - p[k];
+            const double denominator = u.norm() * w.norm();
+            smallest = std::min(smallest, denominator > 0 ? std::acos(std::clamp(u.dot(w) / denominator, -1.0, 1.0)) : 0.0);
+        }
+        return smallest;
+    };
+    // The normal of the face across the halfedge h's edge from h's face (zero at a boundary).
+    auto outerNormal = [&](HalfedgeHandle h) {
+        const FaceHandle g = mesh.face_handle(mesh.opposite_halfedge_handle(h));
+        if (!g.is_valid()) return Vec3(Vec3::Zero());
+        const auto [p, q, r] = faceVertices(mesh, g);
+        return normalOf(at(p), at(q), at(r));
+    };
+    std::size_t flips = 0;
+    for (int sweep = 0; sweep < 8; ++sweep) {
+        std::size_t flipped = 0;
+        for (EdgeHandle e : edges) {
+            if (mesh.status(e).deleted() || mesh.is_boundary(e) || !mesh.is_flip_ok(e)) continue;
+            const HalfedgeHandle h = mesh.halfedge_handle(e, 0), o = mesh.opposite_halfedge_handle(h);
+            const HalfedgeHandle hbc = mesh.next_halfedge_handle(h), hca = mesh.next_halfedge_handle(hbc);
+            const HalfedgeHandle had = mesh.next_halfedge_handle(o), hdb = mesh.next_halfedge_handle(had);
+            const VertexHandle va = mesh.from_vertex_handle(h), vb = mesh.to_vertex_handle(h);
+            const VertexHandle vc = mesh.to_vertex_handle(hbc), vd = mesh.to_vertex_handle(had);
+            const Vec3 a = at(va), b = at(vb), c = at(vc), d = at(vd);
+            const Vec3 nf = normalOf(a, b, c), ng = normalOf(b, a, d);      // now: (a, b, c), (b, a, d)
+            const Vec3 nf2 = normalOf(c, a, d), ng2 = normalOf(d, b, c);    // flipped: (c, a, d), (d, b, c)
+            if (nf.isZero() || ng.isZero() || nf2.isZero() || ng2.isZero()) continue;
+            const Vec3 mean = (nf + ng).normalized();
+            if (!(nf2.dot(mean) > 0) || !(ng2.dot(mean) > 0) || !(nf2.dot(ng2) > -0.5)) continue;
+            const double oldAngle = std::min(smallestAngle(a, b, c), smallestAngle(b, a, d));
+            const double newAngle = std::min(smallestAngle(c, a, d), smallestAngle(d, b, c));
+            if (newAngle < std::min(0.5 * oldAngle, 10 * M_PI / 180)) continue;
+            const Vec3 obc = outerNormal(hbc), oca = outerNormal(hca), oad = outerNormal(had), odb = outerNormal(hdb);
+            const double lbc = (c - b).norm(), lca = (a - c).norm(), lad = (d - a).norm(), ldb = (b - d).norm();
+            const double before = (b - a).norm() * bend(nf, ng) + lbc * bend(nf, obc) + lca * bend(nf, oca) +
+                                  lad * bend(ng, oad) + ldb * bend(ng, odb);
+            const double after = (d - c).norm() * bend(nf2, ng2) + lbc * bend(ng2, obc) + lca * bend(nf2, oca) +
+                                 lad * bend(nf2, oad) + ldb * bend(ng2, odb);
+            if (!(after < before - 1e-3 * scale)) continue;
+            mesh.flip(e);
+            ++flipped;
+        }
+        flips += flipped;
+        if (!flipped) break;
+    }
+    return flips;
 }
 
 /// One pass: thin rims split, then the vertices on creases and corners fitted (see the file
@@ -589,7 +704,14 @@ SharpenStats sharpenFeatures(Mesh& mesh, const SharpenOptions& o)
         if (!markImageCreases(mesh, start, geo, o, o.imageStep * o.image->voxelSize(), imageCrease)) return stats;
     }
     for (int pass = 0; pass < o.passes; ++pass) sharpenPass(mesh, o, stats);
-    if (o.insertCreases) stats.creaseVertices = insertCreaseVertices(mesh, o).size();
+    std::vector<VertexHandle> added;
+    for (int pass = 0; o.insertCreases && pass < o.insertPasses; ++pass) {
+        const std::vector<VertexHandle> more = insertCreaseVertices(mesh, o);
+        if (more.empty()) break;
+        added.insert(added.end(), more.begin(), more.end());
+    }
+    stats.creaseVertices = added.size();
+    if (o.alignCreases && !added.empty()) stats.creaseFlips = alignCreaseEdges(mesh, added);
     const double meanEdge = meanEdgeLength(mesh);
     for (auto v : mesh.vertices()) {
         const std::size_t i = std::size_t(v.idx());

@@ -316,7 +316,9 @@ TEST_CASE("sharpen: a crease cut off between two vertices gets a vertex on it (c
     // 5, which run across the cube's edges and corners, not along them), with the sharp cube as
     // its image: the fit brings the vertices near the edges out to them, but faces across a corner
     // still cut it off. Measured: the cube's edges (corners included) to the mesh 1.41, fitted
-    // 1.26, with 8 vertices added (its corners) 0.61.
+    // 1.26, with 8 vertices added on creases 0.61 (one pass, crease points only); with the
+    // creases' ends taken as corners, a second pass and edges flipped along the creases, 16
+    // vertices added and 0.009.
     const double h = 10, r = 1.5;
     Mesh cube = makeIcosphere(Vec3::Zero(), 2 * h, 2);
     for (auto v : cube.vertices()) {
@@ -351,12 +353,24 @@ TEST_CASE("sharpen: a crease cut off between two vertices gets a vertex on it (c
     none.insertCreases = false;
     Mesh without = cube;
     const SharpenStats k = sharpenFeatures(without, none);
+    SharpenOptions plain = o; // crease points only, one pass, no flips
+    plain.cornerInset = 0;
+    plain.insertPasses = 1;
+    plain.alignCreases = false;
+    Mesh first = cube;
+    const SharpenStats f = sharpenFeatures(first, plain);
     MESSAGE("icosphere on a rounded cube: edges to the mesh " << edgeToMesh(cube) << " -> " << edgeToMesh(without)
-                                                               << " fitted, " << edgeToMesh(with) << " with " << s.creaseVertices
-                                                               << " vertices added on creases");
+                                                               << " fitted, " << edgeToMesh(first) << " with " << f.creaseVertices
+                                                               << " vertices on creases (one pass), " << edgeToMesh(with)
+                                                               << " with " << s.creaseVertices << " (corners, two passes) and "
+                                                               << s.creaseFlips << " edges flipped along creases");
     CHECK(k.creaseVertices == 0);
     CHECK(s.creaseVertices > 0);
+    CHECK(s.creaseFlips > 0);
+    CHECK(f.creaseFlips == 0);
     CHECK(with.n_vertices() == cube.n_vertices() + s.rimSplits + s.creaseVertices);
-    CHECK(edgeToMesh(with) < edgeToMesh(without));
+    CHECK(edgeToMesh(first) < edgeToMesh(without));
+    CHECK(edgeToMesh(with) < 0.5 * edgeToMesh(first));
+    checkValidAfter(first, 2);
     checkValidAfter(with, 2);
 }

@@ -338,6 +338,7 @@ PipelineResult meshVolume(Volume& volume, const PipelineOptions& options)
         r.sharpened = ss.moved;
         r.rimSplits = ss.rimSplits;
         r.creaseVertices = ss.creaseVertices;
+        r.creaseFlips = ss.creaseFlips;
     }
     analyseResult(r);
     return r;
@@ -449,6 +450,7 @@ std::string pipelineStatsJson(const PipelineResult& r, const PipelineRecord& rec
                     {"sharpened_vertices", r.sharpened},
                     {"rim_splits", r.rimSplits},
                     {"crease_vertices", r.creaseVertices},
+                    {"crease_flips", r.creaseFlips},
                     {"splits", e.splits},
                     {"collapses", e.collapses},
                     {"flips", e.flips},

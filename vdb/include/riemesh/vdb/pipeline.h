@@ -157,6 +157,7 @@ struct PipelineResult {
     std::size_t sharpened = 0;          ///< vertices moved by --sharpen (0 when off or undone)
     std::size_t rimSplits = 0;          ///< thin-rim vertices split in two by the sharpening (SharpenStats)
     std::size_t creaseVertices = 0;     ///< vertices the sharpening added on creases (SharpenStats)
+    std::size_t creaseFlips = 0;        ///< edges it flipped to run along creases
     int levels = 0;                     ///< coarse-to-fine levels used below the finest
     VolumeMetricStats metric;           ///< zero with the Euclidean metric
     ImageInfo image;                    ///< the image meshed (after downsampling)
