@@ -661,7 +661,7 @@ class Report:
         if not have_cgal:
             self.md.append("**CGAL Mesh_3 not measured**: `cgal_bench` is not in %s (it is built only where CGAL is "
                            "installed: Debian libcgal-dev, which scripts/setup installs).\n" % b.bin)
-        rows, extra, corner = [], [], {}
+        rows, extra, corner = [], [], {}  # corner: label -> method -> row, for the pictured images
         analytic = set()
         for shape, noise, seed in images:
             tag = "%s_n%g_s%d" % ("cube" if shape == "cube-cavity" else "plate", noise, seed)
@@ -694,7 +694,7 @@ class Report:
                                  if ok(rs) else None))
             # Mesh files only for the image pictured (vdb_bench writes no file for an empty mesh, and the thin
             # plate smoothed at width 2 has no voxel left above the iso value).
-            pictured = (shape, noise, seed) == images[0]
+            pictured = (shape, noise, seed) in (images[0], ("thin-plate", 0.5, 1))
             obj_dir = os.path.join(b.work, "sharp_" + tag)
             peers = []
             for g in smoothings:
@@ -732,7 +732,7 @@ class Report:
                     acc = min(good, key=lambda x: x["mean_voxels"] + x["surface_mean_voxels"])
                     extra.append(dict(acc, image=label, method="CGAL Mesh_3, most accurate of %d runs" % len(runs)))
             if pictured:
-                corner = {x["method"]: x for x in rows if x.get("image") == label}
+                corner[label] = {x["method"]: x for x in rows if x.get("image") == label}
         self.results["sharp"] = rows
         cols = ["image", "method", "setting", "status", "vertices", "mean_voxels", "surface_mean_voxels",
                 "hausdorff_voxels", "components", "genus", "closed_manifold", "seconds", "smooth_seconds"]
@@ -810,19 +810,21 @@ class Report:
         self.md.append("\n".join(lines) + "\n")
         if not self.q:
             self.sharp_held_out()
-        # One picture of each method on the first cube (seen from a corner).
-        pics = []
-        for method in SHARP_METHODS:
-            x = next((y for k, y in corner.items() if k.split(" (")[0] == method), None)
-            if not x or not ok(x) or not os.path.exists(x.get("mesh", "")):
-                continue
-            png = os.path.join(b.out, "sharp_%s.png" % method.replace(" --", "_").split()[0].lower())
-            if b.render(x["mesh"], png, "%s: %s vertices" % (method, fmt(x["vertices"])), ["--wire", "--view", "iso"]):
-                pics.append((method, os.path.basename(png)))
-        if pics:
-            self.md.append("\n%s, seen from a corner (edges coloured by length):\n\n| %s |\n|%s\n| %s |\n" % (
-                next(iter(corner.values()))["image"], " | ".join(p[0] for p in pics), "---|" * len(pics),
-                " | ".join("![%s](%s)" % p for p in pics)))
+        # One picture of each method on the first cube and the first plate (seen from a corner).
+        for k, (label, methods) in enumerate(corner.items()):
+            pics = []
+            for method in SHARP_METHODS:
+                x = next((y for m, y in methods.items() if m.split(" (")[0] == method), None)
+                if not x or not ok(x) or not os.path.exists(x.get("mesh", "")):
+                    continue
+                png = os.path.join(b.out, "sharp_%s%s.png" % ("" if k == 0 else "plate_",
+                                                              method.replace(" --", "_").split()[0].lower()))
+                if b.render(x["mesh"], png, "%s: %s vertices" % (method, fmt(x["vertices"])), ["--wire", "--view", "iso"]):
+                    pics.append((method, os.path.basename(png)))
+            if pics:
+                self.md.append("\n%s, seen from a corner (edges coloured by length):\n\n| %s |\n|%s\n| %s |\n" % (
+                    label, " | ".join(p[0] for p in pics), "---|" * len(pics),
+                    " | ".join("![%s](%s)" % p for p in pics)))
 
     def sharp_held_out(self):
         """riemesh with and without its sharpening on seeds the sharpening was not tuned on (4-9)."""
