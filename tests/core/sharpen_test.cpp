@@ -374,3 +374,46 @@ TEST_CASE("sharpen: a crease cut off between two vertices gets a vertex on it (c
     checkValidAfter(first, 2);
     checkValidAfter(with, 2);
 }
+
+TEST_CASE("sharpen: a result that would cross the surface is not kept (sharpenFeaturesEmbedded)")
+{
+    // A cube rounded by r = 1.5 with its sharp image, and a small ball just off one of its corners
+    // that the image does not show: the fit takes the corner's vertices out to the sharp corner,
+    // which lies inside the ball. sharpenFeatures alone leaves faces crossing; the embedded form
+    // puts the surface back as it was and reports nothing done.
+    const double h = 10;
+    Mesh mesh = roundedCube(h, 1.5, 1.5);
+    const Mesh ball = makeIcosphere(Vec3::Constant(9.9), 0.6, 2);
+    std::vector<VertexHandle> ids;
+    for (auto v : ball.vertices()) ids.push_back(mesh.add_vertex(ball.point(v)));
+    for (auto f : ball.faces()) {
+        const auto [a, b, c] = faceVertices(ball, f);
+        mesh.add_face(ids[std::size_t(a.idx())], ids[std::size_t(b.idx())], ids[std::size_t(c.idx())]);
+    }
+    REQUIRE_MESH_OK(mesh);
+    REQUIRE(findSelfIntersections(mesh).count() == 0);
+    const Box3 box(Vec3::Constant(-20), Vec3::Constant(20));
+    const FunctionImage sharpCube([&](const Vec3& p) { return -boxSdf(p, h); }, box, 0.5);
+    SharpenOptions o;
+    o.image = &sharpCube;
+    o.iso = 0;
+    Mesh plain = mesh;
+    const SharpenStats s = sharpenFeatures(plain, o);
+    const std::size_t crossings = findSelfIntersections(plain).count();
+    MESSAGE("sharpened without the check: " << s.moved << " vertices moved, " << crossings << " crossing face pairs");
+    REQUIRE(s.moved > 0);
+    REQUIRE(crossings > 0); // (else this test shows nothing)
+    Mesh kept = mesh;
+    const SharpenStats e = sharpenFeaturesEmbedded(kept, o);
+    CHECK(e.moved == 0);
+    CHECK(e.creaseVertices == 0);
+    CHECK(kept.n_vertices() == mesh.n_vertices());
+    CHECK(kept.n_faces() == mesh.n_faces());
+    double largest = 0;
+    for (auto v : mesh.vertices()) largest = std::max(largest, (position(kept, v) - position(mesh, v)).norm());
+    CHECK(largest == 0);
+    CHECK(findSelfIntersections(kept).count() == 0);
+    // Without the ball, the same cube is sharpened and kept.
+    Mesh alone = roundedCube(h, 1.5, 1.5);
+    CHECK(sharpenFeaturesEmbedded(alone, o).moved > 0);
+}
