@@ -167,10 +167,42 @@ TEST_CASE("phantom: the same seed gives the same volume, another seed another on
     CHECK(differs);
 }
 
+TEST_CASE("phantom: notched-block is one solid with a notch along an edge; its distance is exact")
+{
+    PhantomOptions o;
+    o.size = 40;
+    const Phantom p = makePhantom(PhantomShape::NotchedBlock, o);
+    auto acc = p.sdf->getConstAccessor();
+    const int n = o.size;
+    CHECK(countComponents(n, [&](const Coord& c) { return acc.getValue(c) < 0; }) == 1);
+    CHECK(countComponents(n, [&](const Coord& c) { return acc.getValue(c) >= 0; }) == 1);
+    const double cc = 0.5 * (n - 1), h = 0.3 * n, s = 0.05 * n;
+    auto d = [&](double x, double y, double z) { return phantomDistance(PhantomShape::NotchedBlock, n, openvdb::Vec3d(cc + x, cc + y, cc + z)); };
+    CHECK(d(0, 0, 0) == doctest::Approx(-s * std::sqrt(2.0))); // centre: nearest is the concave edge
+    CHECK(d(-h + 1, 0, -s) == doctest::Approx(-1));     // a voxel inside the -x face
+    CHECK(d(s + 4, 0, s + 4) == doctest::Approx(4));    // in the notch, 4 from both walls: 4 from the edge
+    CHECK(d(h - 1, 0, h - 1) == doctest::Approx(h - 1 - s)); // deep in the notch: its walls, not its far end
+    CHECK(d(h + 3, 0, -h - 4) == doctest::Approx(5));   // outside a convex edge
+    // Against brute force: the distance to the solid's voxel-centre samples bounds it from above.
+    for (const auto& q : {openvdb::Vec3d(3, 1, 9), openvdb::Vec3d(-9, 4, 2), openvdb::Vec3d(9, -2, 9)}) {
+        const double exact = d(q.x(), q.y(), q.z());
+        double nearest = 1e300;
+        for (double x = -h; x <= h; x += 0.25)
+            for (double z = -h; z <= h; z += 0.25) {
+                if (x > s && z > s) continue; // the notch
+                for (const double y : {q.y()})
+                    if (exact > 0) nearest = std::min(nearest, std::hypot(x - q.x(), z - q.z()) + std::abs(y - q.y()));
+            }
+        if (exact > 0) CHECK(exact <= nearest + 1e-9);
+        if (exact > 0) CHECK(exact >= nearest - 0.36); // (the samples' spacing)
+    }
+}
+
 TEST_CASE("phantom: unknown shape names and bad sizes are refused")
 {
     CHECK_THROWS_AS(phantomShapeFromName("cube"), std::invalid_argument);
     CHECK(phantomShapeFromName("thin-plate") == PhantomShape::ThinPlate);
+    CHECK(phantomShapeFromName("notched-block") == PhantomShape::NotchedBlock);
     PhantomOptions o;
     o.size = 4;
     CHECK_THROWS_AS(makePhantom(PhantomShape::Ball, o), std::invalid_argument);

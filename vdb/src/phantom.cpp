@@ -15,7 +15,10 @@ namespace riemesh::vdb {
 
 using openvdb::Vec3d;
 
-std::vector<std::string> phantomShapeNames() { return {"cube-cavity", "ball", "torus", "two-spheres", "thin-plate"}; }
+std::vector<std::string> phantomShapeNames()
+{
+    return {"cube-cavity", "ball", "torus", "two-spheres", "thin-plate", "notched-block"};
+}
 
 PhantomShape phantomShapeFromName(const std::string& name)
 {
@@ -127,6 +130,21 @@ double phantomDistance(PhantomShape shape, int size, const Vec3d& p)
         return std::min((p - (c + Vec3d(off, 0, 0))).length(), (p - (c - Vec3d(off, 0, 0))).length()) - r;
     }
     case PhantomShape::ThinPlate: return boxDistance(p, c, Vec3d(0.35 * n, 0.35 * n, 1.5));
+    case PhantomShape::NotchedBlock: {
+        // The cube A less the notch B (x and z beyond s from the centre, through in y). Inside, the
+        // distance to the boundary is min(depth in A, distance to B); outside, the distance to the
+        // solid, which is the union of the cube's part x <= s and its part x >= s, z <= s.
+        const double h = 0.3 * n, s = 0.05 * n;
+        const double inA = boxDistance(p, c, Vec3d(h));
+        const double far = 2 * h; // the notch box reaches past the cube
+        const Vec3d notchLo(cc + s, cc - far, cc + s), notchHi(cc + far, cc + far, cc + far);
+        const double toB = boxDistance(p, 0.5 * (notchLo + notchHi), 0.5 * (notchHi - notchLo));
+        if (inA < 0 && toB > 0) return std::max(inA, -toB);
+        const Vec3d loX(cc - h, cc - h, cc - h), hiX(cc + s, cc + h, cc + h);  // x <= s
+        const Vec3d loZ(cc + s, cc - h, cc - h), hiZ(cc + h, cc + h, cc + s);  // x >= s, z <= s
+        return std::min(boxDistance(p, 0.5 * (loX + hiX), 0.5 * (hiX - loX)),
+                        boxDistance(p, 0.5 * (loZ + hiZ), 0.5 * (hiZ - loZ)));
+    }
     }
     return 0;
 }

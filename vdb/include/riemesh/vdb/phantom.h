@@ -22,10 +22,13 @@ enum class PhantomShape {
     Ball,       ///< a ball (genus 0)
     Torus,      ///< a torus (genus 1)
     TwoSpheres, ///< two balls three voxels apart (two components: a model must not merge them)
-    ThinPlate   ///< a square plate three voxels thick (genus 0: a coarse model punches holes in it)
+    ThinPlate,  ///< a square plate three voxels thick (genus 0: a coarse model punches holes in it)
+    /// a cube (half-size 0.3 N) with a notch cut along one of its edges (x and z above 0.05 N from
+    /// the centre): two concave edges, where the others are convex (genus 0)
+    NotchedBlock
 };
 
-/// "cube-cavity", "ball", "torus", "two-spheres", "thin-plate".
+/// "cube-cavity", "ball", "torus", "two-spheres", "thin-plate", "notched-block".
 std::vector<std::string> phantomShapeNames();
 /// Throws std::invalid_argument listing the valid names when unknown.
 PhantomShape phantomShapeFromName(const std::string& name);
