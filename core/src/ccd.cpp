@@ -272,6 +272,11 @@ Quad edgeEdgeQuad(const std::vector<std::array<int, 2>>& edges, std::size_t e, s
     return e < h ? edgeEdgeQuad(edges[e], edges[h]) : edgeEdgeQuad(edges[h], edges[e]);
 }
 
+/// The grids' cell size: the mean over `count` faces of their swept boxes' largest side
+/// (`extents`, their sum).
+double boxExtent(const Box6& b) { return std::max({b[3] - b[0], b[4] - b[1], b[5] - b[2]}); }
+double cellSize(double extents, std::size_t count) { return std::max(extents / double(count), 1e-9); }
+
 /// Runs query(i, found) for i in [0, count) in parallel, in fixed chunks of kQueryChunk indices,
 /// each appending to its own list; the lists are then appended to `out` in chunk order, so that
 /// `out` is the same, in the same order, for any thread count.
@@ -394,11 +399,10 @@ void SafeStepCache::Impl::candidates(const Mesh& mesh, const StepGeometry& g, do
     for (std::size_t i = 0; i < faceNow.size(); ++i)
         if (faceNow[i][0] >= 0) {
             ++liveFaces;
-            const Box6& b = faceBox[i];
-            extent += std::max({b[3] - b[0], b[4] - b[1], b[5] - b[2]}); // (as the caller measures it)
+            extent += boxExtent(faceBox[i]);
         }
     for (const auto& x : edgeNow) liveEdges += x[0] >= 0;
-    if (liveFaces > 0) cell = std::max(extent / double(liveFaces), 1e-9); // this step's, as without a cache
+    if (liveFaces > 0) cell = cellSize(extent, liveFaces); // this step's, as without a cache
     // First use, or renumbered (garbage collection: invalidate(), or noticed by the counts):
     // anchor here. Otherwise anchor again when the primitives out of their clearance are too many.
     bool rebuilt = false;
@@ -646,15 +650,14 @@ SafeStepStats limitStepToCollisionFree(Mesh& mesh, const std::vector<Vec3>& star
         std::vector<double>& extents = scratch.extents;
         extents.assign(mesh.n_faces(), -1.0);
         forLive<FaceHandle>(mesh, mesh.n_faces(), [&](std::size_t f) {
-            const Box6 b = g.faceBox(faceIds(mesh, FaceHandle(int(f))));
-            extents[f] = std::max({b[3] - b[0], b[4] - b[1], b[5] - b[2]});
+            extents[f] = boxExtent(g.faceBox(faceIds(mesh, FaceHandle(int(f)))));
         });
         double extent = 0;
         std::size_t faceCount = 0;
         for (const double x : extents)
             if (x >= 0) extent += x, ++faceCount;
         if (faceCount == 0) return stats;
-        cell = std::max(extent / double(faceCount), 1e-9);
+        cell = cellSize(extent, faceCount);
     }
     // A step in which many vertices move far (a front travelling, a new level settling) would
     // leave them out of their clearance however they were anchored: it is searched from scratch,

@@ -486,9 +486,7 @@ std::size_t alignCreaseEdges(Mesh& mesh, const std::vector<VertexHandle>& seeds)
     // The normal of the face across the halfedge h's edge from h's face (zero at a boundary).
     auto outerNormal = [&](HalfedgeHandle h) {
         const FaceHandle g = mesh.face_handle(mesh.opposite_halfedge_handle(h));
-        if (!g.is_valid()) return Vec3(Vec3::Zero());
-        const auto [p, q, r] = faceVertices(mesh, g);
-        return normalOf(at(p), at(q), at(r));
+        return g.is_valid() ? faceNormal(mesh, g) : Vec3(Vec3::Zero());
     };
     std::size_t flips = 0;
     for (int sweep = 0; sweep < 8; ++sweep) {
