@@ -265,13 +265,6 @@ bool shareVertex(const std::array<int, 2>& x, const std::array<int, 2>& y)
 }
 Quad vertexFaceQuad(int i, const std::array<int, 3>& t) { return {0, i, t[0], t[1], t[2]}; }
 Quad edgeEdgeQuad(const std::array<int, 2>& x, const std::array<int, 2>& y) { return {1, x[0], x[1], y[0], y[1]}; }
-/// Edges e and h (indices) in index order, as the search from scratch pairs them: the narrow
-/// phase is symmetric in exact arithmetic only.
-Quad edgeEdgeQuad(const std::vector<std::array<int, 2>>& edges, std::size_t e, std::size_t h)
-{
-    return e < h ? edgeEdgeQuad(edges[e], edges[h]) : edgeEdgeQuad(edges[h], edges[e]);
-}
-
 /// The grids' cell size: the mean over `count` faces of their swept boxes' largest side
 /// (`extents`, their sum).
 double boxExtent(const Box6& b) { return std::max({b[3] - b[0], b[4] - b[1], b[5] - b[2]}); }
@@ -347,12 +340,19 @@ struct SafeStepCache::Impl {
     std::vector<int> vertexOf, faceOf, edgeOf; ///< grid item -> element index
     std::size_t rebuilds = 0;
 
-    // This step's state.
+    int chi0 = 0; ///< the Euler characteristic at the rebuild (kept until the next: see candidates)
+
+    // This step's state. faceNow, edgeNow and the boxes are filled for every element at a rebuild
+    // and for the dirty ones otherwise (the others' corners are faceAt0's, edgeAt0's).
     std::vector<std::array<int, 3>> faceNow; ///< corners by face index ({-1, -1, -1}: deleted)
     std::vector<std::array<int, 2>> edgeNow;
     std::vector<Box6> faceBox, edgeBox; ///< swept boxes by index (grown as in allCandidates)
-    std::vector<char> cleanV, cleanF, cleanE;
-    std::vector<int> dirtyV, dirtyF, dirtyE;
+    std::vector<char> cleanV;
+    std::vector<int> dirtyV, dirtyF, dirtyE, seeds;
+    std::size_t liveV = 0; ///< live vertices (classify's count)
+    /// Stamps by face and edge index: looked at in this step's classify (seen), found dirty.
+    std::vector<unsigned> seenF, seenE, dirtyAtF, dirtyAtE;
+    unsigned stamp = 0;
     std::vector<Box6> dirtyBox;
     detail::PackedBoxGrid dirtyGrid;
     struct Near { ///< a pair closer than C at the rebuild: its four vertices and distance
@@ -364,11 +364,21 @@ struct SafeStepCache::Impl {
     std::vector<double> clearance;
     std::vector<std::vector<Quad>> lists;
 
-    void candidates(const Mesh& mesh, const StepGeometry& g, double cell, const SafeStepOptions& options,
-                    std::vector<Quad>& out, SafeStepStats& stats);
+    void candidates(Mesh& mesh, const StepGeometry& g, const SafeStepOptions& options, std::vector<Quad>& out,
+                    SafeStepStats& stats);
+    void anchorHere(Mesh& mesh, const StepGeometry& g, double radiusFraction);
     void rebuild(const Mesh& mesh, const std::vector<Vec3>& start, double eta, double cell, double radiusFraction);
     void classify(const Mesh& mesh, const StepGeometry& g);
-    void collect(const StepGeometry& g, double cell, std::vector<Quad>& candidates);
+    void collect(const Mesh& mesh, const StepGeometry& g, std::vector<Quad>& candidates);
+    /// Clean: existed at the rebuild, is live, and no dirty or edited vertex is one of its corners.
+    bool cleanFace(const Mesh& mesh, std::size_t f) const
+    {
+        return f < faces0 && dirtyAtF[f] != stamp && !mesh.status(FaceHandle(int(f))).deleted();
+    }
+    bool cleanEdge(const Mesh& mesh, std::size_t e) const
+    {
+        return e < edges0 && dirtyAtE[e] != stamp && !mesh.status(EdgeHandle(int(e))).deleted();
+    }
 };
 
 SafeStepCache::SafeStepCache() : mImpl(std::make_unique<Impl>()) {}
@@ -378,8 +388,34 @@ SafeStepCache& SafeStepCache::operator=(SafeStepCache&&) noexcept = default;
 void SafeStepCache::invalidate() { mImpl->valid = false; }
 std::size_t SafeStepCache::rebuilds() const { return mImpl->rebuilds; }
 
-void SafeStepCache::Impl::candidates(const Mesh& mesh, const StepGeometry& g, double cell,
-                                     const SafeStepOptions& options, std::vector<Quad>& out, SafeStepStats& stats)
+void SafeStepCache::Impl::candidates(Mesh& mesh, const StepGeometry& g, const SafeStepOptions& options,
+                                     std::vector<Quad>& out, SafeStepStats& stats)
+{
+    // First use, or renumbered (garbage collection: invalidate(), or noticed by the counts):
+    // anchor here. Otherwise anchor again when the primitives out of their clearance are too many.
+    OpenMesh::VPropHandleT<char> edited;
+    bool rebuilt = false;
+    if (!valid || mesh.n_vertices() < vertices0 || mesh.n_faces() < faces0 || mesh.n_edges() < edges0 ||
+        !mesh.get_property_handle(edited, kEditedProperty)) {
+        anchorHere(mesh, g, options.clearance);
+        rebuilt = true;
+    }
+    classify(mesh, g);
+    // The live faces and edges without a pass over them: split, collapse and flip keep the Euler
+    // characteristic, and any other edit is followed by garbage collection and invalidate(); on
+    // a closed triangle mesh E = 3 (V - chi) and F = 2 (V - chi).
+    const double liveFacesEdges = 5.0 * (double(liveV) - double(chi0));
+    if (!rebuilt && double(dirtyF.size() + dirtyE.size()) > options.rebuildFraction * liveFacesEdges) {
+        anchorHere(mesh, g, options.clearance);
+        classify(mesh, g);
+        rebuilt = true;
+    }
+    stats.rebuilt = rebuilt;
+    stats.dirty = dirtyF.size() + dirtyE.size();
+    collect(mesh, g, out);
+}
+
+void SafeStepCache::Impl::anchorHere(Mesh& mesh, const StepGeometry& g, double radiusFraction)
 {
     faceNow.assign(mesh.n_faces(), {-1, -1, -1});
     faceBox.resize(mesh.n_faces());
@@ -388,13 +424,11 @@ void SafeStepCache::Impl::candidates(const Mesh& mesh, const StepGeometry& g, do
         faceBox[i] = g.faceBox(faceNow[i]);
     });
     edgeNow.assign(mesh.n_edges(), {-1, -1});
-    edgeBox.resize(mesh.n_edges());
     forLive<EdgeHandle>(mesh, mesh.n_edges(), [&](std::size_t i) {
         const HalfedgeHandle h = mesh.halfedge_handle(EdgeHandle(int(i)), 0);
         edgeNow[i] = {mesh.from_vertex_handle(h).idx(), mesh.to_vertex_handle(h).idx()};
-        edgeBox[i] = g.edgeBox(edgeNow[i]);
     });
-    std::size_t liveFaces = 0, liveEdges = 0;
+    std::size_t liveFaces = 0, liveEdges = 0, liveVertices = 0;
     double extent = 0;
     for (std::size_t i = 0; i < faceNow.size(); ++i)
         if (faceNow[i][0] >= 0) {
@@ -402,23 +436,13 @@ void SafeStepCache::Impl::candidates(const Mesh& mesh, const StepGeometry& g, do
             extent += boxExtent(faceBox[i]);
         }
     for (const auto& x : edgeNow) liveEdges += x[0] >= 0;
-    if (liveFaces > 0) cell = cellSize(extent, liveFaces); // this step's, as without a cache
-    // First use, or renumbered (garbage collection: invalidate(), or noticed by the counts):
-    // anchor here. Otherwise anchor again when the primitives out of their clearance are too many.
-    bool rebuilt = false;
-    if (!valid || mesh.n_vertices() < vertices0 || mesh.n_faces() < faces0 || mesh.n_edges() < edges0) {
-        rebuild(mesh, g.start, g.eta, cell, options.clearance);
-        rebuilt = true;
-    }
-    classify(mesh, g);
-    if (!rebuilt && double(dirtyF.size() + dirtyE.size()) > options.rebuildFraction * double(liveFaces + liveEdges)) {
-        rebuild(mesh, g.start, g.eta, cell, options.clearance);
-        classify(mesh, g);
-        rebuilt = true;
-    }
-    stats.rebuilt = rebuilt;
-    stats.dirty = dirtyF.size() + dirtyE.size();
-    collect(g, cell, out);
+    for (auto v : mesh.vertices()) (void)v, ++liveVertices;
+    chi0 = int(liveVertices) - int(liveEdges) + int(liveFaces);
+    rebuild(mesh, g.start, g.eta, cellSize(extent, std::max<std::size_t>(liveFaces, 1)), radiusFraction);
+    // The edits so far are in faceAt0 and edgeAt0: mark the next ones.
+    OpenMesh::VPropHandleT<char> edited;
+    if (!mesh.get_property_handle(edited, kEditedProperty)) mesh.add_property(edited, kEditedProperty);
+    for (auto v : mesh.all_vertices()) mesh.property(edited, v) = 0;
 }
 
 void SafeStepCache::Impl::rebuild(const Mesh& mesh, const std::vector<Vec3>& start, double eta, double cell,
@@ -514,37 +538,81 @@ void SafeStepCache::Impl::rebuild(const Mesh& mesh, const std::vector<Vec3>& sta
 
 void SafeStepCache::Impl::classify(const Mesh& mesh, const StepGeometry& g)
 {
-    // The flags in parallel, then the dirty lists in index order.
+    if (++stamp == 0) { // (wrapped: forget every stamp)
+        std::fill(seenF.begin(), seenF.end(), 0u), std::fill(dirtyAtF.begin(), dirtyAtF.end(), 0u);
+        std::fill(seenE.begin(), seenE.end(), 0u), std::fill(dirtyAtE.begin(), dirtyAtE.end(), 0u);
+        stamp = 1;
+    }
+    // The vertices' flags in parallel, then the dirty ones in index order.
     cleanV.assign(mesh.n_vertices(), 0);
     forLive<VertexHandle>(mesh, mesh.n_vertices(), [&](std::size_t i) {
         cleanV[i] = i < vertices0 && (g.start[i] - anchor[i]).squaredNorm() < allowed2[i] &&
                     (g.end[i] - anchor[i]).squaredNorm() < allowed2[i];
     });
+    OpenMesh::VPropHandleT<char> edited;
+    const bool marks = mesh.get_property_handle(edited, kEditedProperty);
     dirtyV.clear();
-    for (std::size_t i = 0; i < cleanV.size(); ++i)
-        if (!cleanV[i] && !mesh.status(VertexHandle(int(i))).deleted()) dirtyV.push_back(int(i));
+    seeds.clear();
+    liveV = 0;
+    for (std::size_t i = 0; i < cleanV.size(); ++i) {
+        const VertexHandle v{int(i)};
+        if (mesh.status(v).deleted()) continue;
+        ++liveV;
+        if (!cleanV[i]) dirtyV.push_back(int(i));
+        if (!cleanV[i] || (marks && mesh.property(edited, v))) seeds.push_back(int(i));
+    }
+    // Faces and edges: clean when they existed at the rebuild with the same corners, all clean.
+    // Only those around a dirty or an edited vertex can be anything else (kEditedProperty): they
+    // are looked at, each once, in the order of their first such corner, then sorted.
+    const std::size_t nf = mesh.n_faces(), ne = mesh.n_edges();
+    for (auto* x : {&seenF, &dirtyAtF}) x->resize(std::max(x->size(), nf), 0u);
+    for (auto* x : {&seenE, &dirtyAtE}) x->resize(std::max(x->size(), ne), 0u);
+    faceNow.resize(std::max(faceNow.size(), nf)); // (each its own: a rebuild sizes some of them)
+    edgeNow.resize(std::max(edgeNow.size(), ne));
+    faceBox.resize(std::max(faceBox.size(), nf));
+    edgeBox.resize(std::max(edgeBox.size(), ne));
     auto clean = [&](const int* v, int k) {
         for (int i = 0; i < k; ++i)
             if (!cleanV[std::size_t(v[i])]) return false;
         return true;
     };
-    // Faces and edges: clean when they existed at the rebuild with the same corners, all clean.
-    auto classifyAll = [&](const auto& now, const auto& at0, std::size_t count0, std::vector<char>& cleanOf,
-                           std::vector<int>& dirty) {
-        cleanOf.assign(now.size(), 0);
-        detail::parallelFor(0, now.size(), kPassGrain, [&](std::size_t x) {
-            if (now[x][0] >= 0) // (live)
-                cleanOf[x] = x < count0 && now[x] == at0[x] && clean(now[x].data(), int(now[x].size()));
-        });
-        dirty.clear();
-        for (std::size_t x = 0; x < now.size(); ++x)
-            if (now[x][0] >= 0 && !cleanOf[x]) dirty.push_back(int(x));
+    dirtyF.clear();
+    dirtyE.clear();
+    auto lookAtFace = [&](FaceHandle fh) {
+        const std::size_t f = std::size_t(fh.idx());
+        if (seenF[f] == stamp || mesh.status(fh).deleted()) return;
+        seenF[f] = stamp;
+        const std::array<int, 3> t = faceIds(mesh, fh);
+        if (f < faces0 && t == faceAt0[f] && clean(t.data(), 3)) return;
+        dirtyAtF[f] = stamp;
+        faceNow[f] = t;
+        dirtyF.push_back(int(f));
     };
-    classifyAll(faceNow, faceAt0, faces0, cleanF, dirtyF);
-    classifyAll(edgeNow, edgeAt0, edges0, cleanE, dirtyE);
+    auto lookAtEdge = [&](EdgeHandle eh) {
+        const std::size_t e = std::size_t(eh.idx());
+        if (seenE[e] == stamp || mesh.status(eh).deleted()) return;
+        seenE[e] = stamp;
+        const HalfedgeHandle h = mesh.halfedge_handle(eh, 0);
+        const std::array<int, 2> x = {mesh.from_vertex_handle(h).idx(), mesh.to_vertex_handle(h).idx()};
+        if (e < edges0 && x == edgeAt0[e] && clean(x.data(), 2)) return;
+        dirtyAtE[e] = stamp;
+        edgeNow[e] = x;
+        dirtyE.push_back(int(e));
+    };
+    for (int i : seeds) {
+        const VertexHandle v(i);
+        for (auto f = mesh.cvf_begin(v); f.is_valid(); ++f) lookAtFace(*f);
+        for (auto e = mesh.cve_begin(v); e.is_valid(); ++e) lookAtEdge(*e);
+    }
+    for (std::size_t f = faces0; f < nf; ++f) lookAtFace(FaceHandle(int(f))); // (new ones: all have a new corner)
+    for (std::size_t e = edges0; e < ne; ++e) lookAtEdge(EdgeHandle(int(e)));
+    std::sort(dirtyF.begin(), dirtyF.end());
+    std::sort(dirtyE.begin(), dirtyE.end());
+    for (int f : dirtyF) faceBox[std::size_t(f)] = g.faceBox(faceNow[std::size_t(f)]);
+    for (int e : dirtyE) edgeBox[std::size_t(e)] = g.edgeBox(edgeNow[std::size_t(e)]);
 }
 
-void SafeStepCache::Impl::collect(const StepGeometry& g, double cell, std::vector<Quad>& candidates)
+void SafeStepCache::Impl::collect(const Mesh& mesh, const StepGeometry& g, std::vector<Quad>& candidates)
 {
     // Clean against clean: nothing to test (see rebuild).
     // Dirty vertices against clean faces (the anchored grid) and dirty faces (a grid of this step).
@@ -554,16 +622,17 @@ void SafeStepCache::Impl::collect(const StepGeometry& g, double cell, std::vecto
     findInChunks(dirtyV.size(), lists, candidates, [&](std::size_t k, std::vector<Quad>& found) {
         const int i = dirtyV[k];
         const Box6 b = g.vertexBox(i);
-        auto consider = [&](std::size_t f) {
-            const auto& t = faceNow[f];
-            if (!hasCorner(t, i) && detail::boxesOverlap(b, faceBox[f]) && g.vertexFace(i, t))
-                found.push_back(vertexFaceQuad(i, t));
+        auto consider = [&](const std::array<int, 3>& t, const Box6& box) {
+            if (!hasCorner(t, i) && detail::boxesOverlap(b, box) && g.vertexFace(i, t)) found.push_back(vertexFaceQuad(i, t));
         };
         faceGrid.query(b, [&](int item) {
             const std::size_t f = std::size_t(faceOf[std::size_t(item)]);
-            if (f < cleanF.size() && cleanF[f]) consider(f);
+            if (cleanFace(mesh, f)) consider(faceAt0[f], g.faceBox(faceAt0[f]));
         });
-        dirtyGrid.query(b, [&](int item) { consider(std::size_t(dirtyF[std::size_t(item)])); });
+        dirtyGrid.query(b, [&](int item) {
+            const std::size_t f = std::size_t(dirtyF[std::size_t(item)]);
+            consider(faceNow[f], faceBox[f]);
+        });
     });
     // Clean vertices against dirty faces.
     findInChunks(dirtyF.size(), lists, candidates, [&](std::size_t k, std::vector<Quad>& found) {
@@ -582,17 +651,18 @@ void SafeStepCache::Impl::collect(const StepGeometry& g, double cell, std::vecto
     findInChunks(dirtyE.size(), lists, candidates, [&](std::size_t k, std::vector<Quad>& found) {
         const std::size_t e = std::size_t(dirtyE[k]);
         const auto& x = edgeNow[e];
-        auto consider = [&](std::size_t h) {
-            const auto& y = edgeNow[h];
-            if (!shareVertex(x, y) && detail::boxesOverlap(edgeBox[e], edgeBox[h]) &&
-                (e < h ? g.edgeEdge(x, y) : g.edgeEdge(y, x)))
-                found.push_back(edgeEdgeQuad(edgeNow, e, h));
+        auto consider = [&](std::size_t h, const std::array<int, 2>& y, const Box6& box) {
+            if (!shareVertex(x, y) && detail::boxesOverlap(edgeBox[e], box) && (e < h ? g.edgeEdge(x, y) : g.edgeEdge(y, x)))
+                found.push_back(e < h ? edgeEdgeQuad(x, y) : edgeEdgeQuad(y, x)); // (in index order, as from scratch)
         };
         edgeGrid.query(edgeBox[e], [&](int item) {
             const std::size_t h = std::size_t(edgeOf[std::size_t(item)]);
-            if (h < cleanE.size() && cleanE[h]) consider(h);
+            if (cleanEdge(mesh, h)) consider(h, edgeAt0[h], g.edgeBox(edgeAt0[h]));
         });
-        dirtyGrid.query(edgeBox[e], [&](int item) { consider(std::size_t(dirtyE[std::size_t(item)])); }, int(k));
+        dirtyGrid.query(edgeBox[e], [&](int item) {
+            const std::size_t h = std::size_t(dirtyE[std::size_t(item)]);
+            consider(h, edgeNow[h], edgeBox[h]);
+        }, int(k));
     });
 }
 
@@ -673,7 +743,7 @@ SafeStepStats limitStepToCollisionFree(Mesh& mesh, const std::vector<Vec3>& star
         allCandidates(g, live, scratch.faces, scratch.edges, cell, scratch.faceBox, scratch.edgeBox, scratch.grid,
                       scratch.lists, candidates);
     } else {
-        cache->impl().candidates(mesh, g, cell, options, candidates, stats);
+        cache->impl().candidates(mesh, g, options, candidates, stats);
     }
     stats.candidates = candidates.size();
 

@@ -107,6 +107,7 @@ VertexHandle collapseUnchecked(Mesh& mesh, HalfedgeHandle h, const Vec3& target)
     mesh.property(velocity, v) = 0.5 * (mesh.property(velocity, u) + mesh.property(velocity, v));
     mesh.collapse(h);
     mesh.set_point(v, toPoint(target));
+    markEdited(mesh, {v}); // (u's faces and edges now end at v)
     return v;
 }
 
@@ -134,6 +135,9 @@ bool isFlipAcceptable(const Mesh& mesh, EdgeHandle e, double minNewDihedralCosin
 
 void flipUnchecked(Mesh& mesh, EdgeHandle e)
 {
+    const HalfedgeHandle h = mesh.halfedge_handle(e, 0), o = mesh.halfedge_handle(e, 1);
+    markEdited(mesh, {mesh.from_vertex_handle(h), mesh.to_vertex_handle(h), mesh.to_vertex_handle(mesh.next_halfedge_handle(h)),
+                      mesh.to_vertex_handle(mesh.next_halfedge_handle(o))});
     mesh.flip(e);
 }
 
@@ -154,6 +158,7 @@ VertexHandle split(Mesh& mesh, EdgeHandle e, const Vec3& position)
     const VertexHandle w = mesh.add_vertex(toPoint(position));
     mesh.property(velocity, w) = mean;
     mesh.split(e, w);
+    markEdited(mesh, {u, v, w});
     return w;
 }
 

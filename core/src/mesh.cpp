@@ -18,6 +18,14 @@ OpenMesh::VPropHandleT<OpenMesh::Vec3d> velocityProperty(Mesh& mesh)
     return prop;
 }
 
+void markEdited(Mesh& mesh, std::initializer_list<VertexHandle> vertices)
+{
+    OpenMesh::VPropHandleT<char> edited;
+    if (!mesh.get_property_handle(edited, kEditedProperty)) return;
+    for (const VertexHandle v : vertices)
+        if (v.is_valid()) mesh.property(edited, v) = 1;
+}
+
 namespace {
 
 /// Spreads the low 21 bits of x to every third bit (Morton interleaving).

@@ -53,10 +53,46 @@ std::vector<EdgeHandle> liveEdges(const Mesh& mesh)
     return edges;
 }
 
+std::array<int, 3> cornersOf(const Mesh& mesh, FaceHandle f)
+{
+    const auto v = faceVertices(mesh, f);
+    return {v[0].idx(), v[1].idx(), v[2].idx()};
+}
+
+std::array<int, 2> endsOf(const Mesh& mesh, EdgeHandle e)
+{
+    const auto h = mesh.halfedge_handle(e, 0);
+    return {mesh.from_vertex_handle(h).idx(), mesh.to_vertex_handle(h).idx()};
+}
+
 /// Random splits, collapses (toward the midpoint) and flips with the invariants checked after each.
+/// The edit marks (kEditedProperty) are checked too: every face or edge that is new or whose
+/// corners changed since the start has a marked corner (what SafeStepCache relies on).
 void runRandomEdits(Mesh& mesh, unsigned seed, int steps)
 {
     const int euler = topologyOf(mesh).euler;
+    OpenMesh::VPropHandleT<char> edited;
+    mesh.add_property(edited, kEditedProperty);
+    for (auto v : mesh.all_vertices()) mesh.property(edited, v) = 0;
+    std::vector<std::array<int, 3>> faces0;
+    for (auto f : mesh.all_faces()) faces0.push_back(cornersOf(mesh, f));
+    std::vector<std::array<int, 2>> edges0;
+    for (auto e : mesh.all_edges()) edges0.push_back(endsOf(mesh, e));
+    auto marked = [&](const auto& corners) {
+        for (int v : corners)
+            if (mesh.property(edited, VertexHandle(v))) return true;
+        return false;
+    };
+    auto checkMarks = [&] {
+        for (auto f : mesh.faces()) {
+            const auto t = cornersOf(mesh, f);
+            if (std::size_t(f.idx()) >= faces0.size() || t != faces0[std::size_t(f.idx())]) REQUIRE(marked(t));
+        }
+        for (auto e : mesh.edges()) {
+            const auto x = endsOf(mesh, e);
+            if (std::size_t(e.idx()) >= edges0.size() || x != edges0[std::size_t(e.idx())]) REQUIRE(marked(x));
+        }
+    };
     std::mt19937 rng(seed);
     int done[3] = {0, 0, 0};
     for (int step = 0; step < steps; ++step) {
@@ -82,6 +118,7 @@ void runRandomEdits(Mesh& mesh, unsigned seed, int steps)
         }
         REQUIRE_MESH_OK(mesh);
         REQUIRE(topologyOf(mesh).euler == euler);
+        checkMarks();
     }
     // The sequence exercised every operation.
     CHECK(done[0] > steps / 10);

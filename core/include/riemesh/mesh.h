@@ -12,6 +12,7 @@
 
 #include <array>
 #include <cstddef>
+#include <initializer_list>
 #include <string>
 #include <vector>
 
@@ -51,6 +52,17 @@ inline constexpr const char* kVelocityProperty = "riemesh:velocity";
 
 /// The velocity property of `mesh`, created (zero-initialised) if missing.
 OpenMesh::VPropHandleT<OpenMesh::Vec3d> velocityProperty(Mesh& mesh);
+
+/// Name of the per-vertex edit mark (char). When a mesh has it, split, collapse and flip
+/// (riemesh/edge_ops.h) set it on every vertex whose faces or edges they change (a face or an
+/// edge whose corners changed has a marked corner). SafeStepCache (riemesh/ccd.h) adds it and
+/// clears it whenever it anchors the mesh, to find the edited faces without comparing them all.
+/// Any other edit of the connectivity must either mark its vertices or be followed by
+/// garbage_collection() and SafeStepCache::invalidate().
+inline constexpr const char* kEditedProperty = "riemesh:edited";
+
+/// Sets the edit mark on `vertices` (see kEditedProperty) if the mesh has it.
+void markEdited(Mesh& mesh, std::initializer_list<VertexHandle> vertices);
 
 /// Counts that describe the topology of a closed mesh (deleted elements are ignored).
 struct MeshTopology {
