@@ -69,6 +69,15 @@ TEST_CASE("box grid: random boxes of mixed sizes, near and far from the origin, 
     }
 }
 
+TEST_CASE("box grid: thousands of boxes, against brute force")
+{
+    std::mt19937 rng(11);
+    std::vector<Box6> boxes, queries;
+    for (int i = 0; i < 9000; ++i) boxes.push_back(randomBox(rng, 5.0, 60.0, i % 97 == 0 ? 30.0 : 1.2));
+    for (int i = 0; i < 400; ++i) queries.push_back(randomBox(rng, 5.0, 62.0, i % 40 == 0 ? 30.0 : 1.0));
+    checkAgainstBruteForce(boxes, queries, 1.5);
+}
+
 TEST_CASE("box grid: a query long along z wraps around the buckets without reporting twice")
 {
     // Few boxes (the fewest buckets) in one column; queries spanning up to the 64-cell limit
