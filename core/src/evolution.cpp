@@ -183,6 +183,9 @@ Evolution::Evolution(Mesh& mesh, std::vector<EvolutionLevel> levels, const Metri
             throw std::invalid_argument("evolution: every level needs an image and a scale >= 1");
     if (mOptions.coarseConvergenceWindow < 1 || mOptions.coarseMaxIterations < 1)
         throw std::invalid_argument("evolution: bad coarse-level limits");
+    if (!(mOptions.coarseExternalLimit >= 0) || !std::isfinite(mOptions.coarseExternalLimit) ||
+        !(mOptions.coarseFreeCurvatureFactor >= 0) || !std::isfinite(mOptions.coarseFreeCurvatureFactor))
+        throw std::invalid_argument("evolution: coarse-level forces must be finite and >= 0");
     prepareMesh(mMesh);
     // The coarse levels' metric reaches out to their surfaces (see coarseMetricReach).
     mLevelMetrics.resize(mLevels.size());
@@ -249,6 +252,10 @@ IterationStats Evolution::step()
     // crease back and it would sharpen into a fin whose sides cross. So the push is capped where
     // the faces would fly faster than vmax / sqrt 2 (never with the defaults: 0.25 vs 0.35 delta).
     ForceOptions forces = o.forces;
+    if (mLevel + 2 < int(mLevels.size())) { // a coarse level but the last (see coarseExternalLimit)
+        forces.externalLimit = o.coarseExternalLimit;
+        forces.freeCurvatureWeight *= o.coarseFreeCurvatureFactor;
+    }
     if (o.damping > 0) forces.externalLimit = std::min(forces.externalLimit, kCreaseRoom * o.damping * vmax / o.delta);
     computeForces(mMesh, image, forces, o.delta, mForces, &metric);
     phase(it.phases.forces);

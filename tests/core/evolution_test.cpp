@@ -12,6 +12,7 @@
 #include <doctest/doctest.h>
 
 #include <cmath>
+#include <limits>
 #include <numeric>
 
 using namespace riemesh;
@@ -426,6 +427,17 @@ TEST_CASE("evolution: nonsense options are refused")
     o.delta = 1;
     o.zeta = 0.5;
     CHECK_THROWS_AS(Evolution(mesh, image, metric, o), std::invalid_argument);
+    o.zeta = 2.5;
+    for (double bad : {-0.1, std::numeric_limits<double>::quiet_NaN(), std::numeric_limits<double>::infinity()}) {
+        CAPTURE(bad);
+        EvolutionOptions c = o;
+        c.coarseExternalLimit = bad;
+        CHECK_THROWS_AS(Evolution(mesh, image, metric, c), std::invalid_argument);
+        c = o;
+        c.coarseFreeCurvatureFactor = bad;
+        CHECK_THROWS_AS(Evolution(mesh, image, metric, c), std::invalid_argument);
+    }
+    CHECK_NOTHROW(Evolution(mesh, image, metric, o));
 }
 
 TEST_CASE("evolution: a mesh growing past maxVertices stops with vertex-cap")
