@@ -1239,6 +1239,30 @@ class Report:
                                    kind.capitalize() + "s", f["label"], l["label"], grow, l["wall"] / f["wall"],
                                    l["peak_mb"] / f["peak_mb"], l["peer_wall"] / f["peer_wall"],
                                    l["peer_peak_mb"] / f["peer_peak_mb"]))
+        # Issue 15's iterations at 400^3 over 100^3 on more than one image: the same phantom with other
+        # noise seeds (the count moves with where a coarse level happens to end).
+        seedRows = []
+        if not self.q:
+            first = {n: x.get("iterations") for x in rows if x["kind"] == "phantom" for n in [x["size"]]}
+            for seed in (1, 2, 3):
+                row = {"seed": seed}
+                for n in (100, 400):
+                    if seed == 1:
+                        row["it%d" % n] = first.get(n)
+                        continue
+                    img = b.phantom(n, 0.5, seed)
+                    x = b.vdb2mesh("iterations_s%d_seed%d" % (n, seed), img, [], self.timeout, reference=False) if img else None
+                    row["it%d" % n] = x.get("iterations") if x and ok(x) else None
+                if row.get("it100") and row.get("it400"):
+                    row["ratio"] = row["it400"] / row["it100"]
+                seedRows.append(row)
+            self.results["iteration_seeds"] = seedRows
+            b.write_csv("iteration_seeds.csv", seedRows, ["seed", "it100", "it400", "ratio"])
+            self.md.append("\nIterations with the defaults, `vdbphantom cube-cavity --noise 0.5` with seeds 1-3 (seed 1 "
+                           "is the table's):\n\n")
+            self.md.append(table([("seed", lambda x: str(x["seed"])), ("100^3", lambda x: fmt(x.get("it100"))),
+                                  ("400^3", lambda x: fmt(x.get("it400"))),
+                                  ("ratio", lambda x: "%.2fx" % x["ratio"] if x.get("ratio") else "-")], seedRows))
         data = {}
         for kind in ("phantom", "sphere"):
             data["scale_%s.dat" % kind] = "".join(
@@ -1519,8 +1543,18 @@ class Report:
         p100, p400 = sc.get(("phantom", 100)), sc.get(("phantom", 400))
         if p100 and p400 and p100.get("iterations") and p400.get("iterations"):
             r = p400["iterations"] / p100["iterations"]
-            lines.append("- Phantom iterations at 400^3 over 100^3 (defaults): %s / %s = %.2fx, target <= 1.3x: %s." % (
-                fmt(p400["iterations"]), fmt(p100["iterations"]), r, verdict(r, 1.3)))
+            seeds = [x for x in self.results.get("iteration_seeds", []) if x.get("ratio")]
+            if len(seeds) > 1:  # the verdict on the worst seed: one image can be lucky
+                worst = max(x["ratio"] for x in seeds)
+                lines.append("- Phantom iterations at 400^3 over 100^3 (defaults): %s / %s = %.2fx; noise seeds %s: %s; "
+                             "worst %.2fx, target <= 1.3x: %s." % (
+                                 fmt(p400["iterations"]), fmt(p100["iterations"]), r,
+                                 ", ".join(str(x["seed"]) for x in seeds),
+                                 ", ".join("%s / %s" % (fmt(x["it400"]), fmt(x["it100"])) for x in seeds),
+                                 worst, verdict(worst, 1.3)))
+            else:
+                lines.append("- Phantom iterations at 400^3 over 100^3 (defaults): %s / %s = %.2fx, target <= 1.3x: %s." % (
+                    fmt(p400["iterations"]), fmt(p100["iterations"]), r, verdict(r, 1.3)))
         for n, limit in ((100, 0.12), (400, 3.0)):
             x = sc.get(("phantom", n))
             if x and x.get("evolve") is not None:
