@@ -1259,7 +1259,7 @@ class Report:
             self.results["iteration_seeds"] = seedRows
             b.write_csv("iteration_seeds.csv", seedRows, ["seed", "it100", "it400", "ratio"])
             self.md.append("\nIterations with the defaults, `vdbphantom cube-cavity --noise 0.5` with seeds 1-3 (seed 1 "
-                           "is the table's):\n\n")
+                           "is the table's):\n")
             self.md.append(table([("seed", lambda x: str(x["seed"])), ("100^3", lambda x: fmt(x.get("it100"))),
                                   ("400^3", lambda x: fmt(x.get("it400"))),
                                   ("ratio", lambda x: "%.2fx" % x["ratio"] if x.get("ratio") else "-")], seedRows))
