@@ -1243,7 +1243,7 @@ class Report:
         # noise seeds (the count moves with where a coarse level happens to end).
         seedRows = []
         if not self.q:
-            first = {n: x.get("iterations") for x in rows if x["kind"] == "phantom" for n in [x["size"]]}
+            first = {x["size"]: x.get("iterations") for x in rows if x["kind"] == "phantom"}
             for seed in (1, 2, 3):
                 row = {"seed": seed}
                 for n in (100, 400):
@@ -1544,17 +1544,14 @@ class Report:
         if p100 and p400 and p100.get("iterations") and p400.get("iterations"):
             r = p400["iterations"] / p100["iterations"]
             seeds = [x for x in self.results.get("iteration_seeds", []) if x.get("ratio")]
+            line = "- Phantom iterations at 400^3 over 100^3 (defaults): %s / %s = %.2fx" % (
+                fmt(p400["iterations"]), fmt(p100["iterations"]), r)
             if len(seeds) > 1:  # the verdict on the worst seed: one image can be lucky
-                worst = max(x["ratio"] for x in seeds)
-                lines.append("- Phantom iterations at 400^3 over 100^3 (defaults): %s / %s = %.2fx; noise seeds %s: %s; "
-                             "worst %.2fx, target <= 1.3x: %s." % (
-                                 fmt(p400["iterations"]), fmt(p100["iterations"]), r,
-                                 ", ".join(str(x["seed"]) for x in seeds),
-                                 ", ".join("%s / %s" % (fmt(x["it400"]), fmt(x["it100"])) for x in seeds),
-                                 worst, verdict(worst, 1.3)))
-            else:
-                lines.append("- Phantom iterations at 400^3 over 100^3 (defaults): %s / %s = %.2fx, target <= 1.3x: %s." % (
-                    fmt(p400["iterations"]), fmt(p100["iterations"]), r, verdict(r, 1.3)))
+                r = max(x["ratio"] for x in seeds)
+                line += "; noise seeds %s: %s; worst %.2fx" % (
+                    ", ".join(str(x["seed"]) for x in seeds),
+                    ", ".join("%s / %s" % (fmt(x["it400"]), fmt(x["it100"])) for x in seeds), r)
+            lines.append(line + ", target <= 1.3x: %s." % verdict(r, 1.3))
         for n, limit in ((100, 0.12), (400, 3.0)):
             x = sc.get(("phantom", n))
             if x and x.get("evolve") is not None:

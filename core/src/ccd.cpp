@@ -428,17 +428,15 @@ void SafeStepCache::Impl::anchorHere(Mesh& mesh, const StepGeometry& g, double r
         const HalfedgeHandle h = mesh.halfedge_handle(EdgeHandle(int(i)), 0);
         edgeNow[i] = {mesh.from_vertex_handle(h).idx(), mesh.to_vertex_handle(h).idx()};
     });
-    std::size_t liveFaces = 0, liveEdges = 0, liveVertices = 0;
+    std::size_t liveFaces = 0;
     double extent = 0;
     for (std::size_t i = 0; i < faceNow.size(); ++i)
         if (faceNow[i][0] >= 0) {
             ++liveFaces;
             extent += boxExtent(faceBox[i]);
         }
-    for (const auto& x : edgeNow) liveEdges += x[0] >= 0;
-    for (auto v : mesh.vertices()) (void)v, ++liveVertices;
-    chi0 = int(liveVertices) - int(liveEdges) + int(liveFaces);
     rebuild(mesh, g.start, g.eta, cellSize(extent, std::max<std::size_t>(liveFaces, 1)), radiusFraction);
+    chi0 = int(vertexOf.size()) - int(edgeOf.size()) + int(faceOf.size()); // (the grids hold the live elements)
     // The edits so far are in faceAt0 and edgeAt0: mark the next ones.
     OpenMesh::VPropHandleT<char> edited;
     if (!mesh.get_property_handle(edited, kEditedProperty)) mesh.add_property(edited, kEditedProperty);
