@@ -344,6 +344,16 @@ struct SafeStepCache::Impl {
     std::size_t rebuilds = 0;
 
     int chi0 = 0; ///< the Euler characteristic at the rebuild (kept until the next: see candidates)
+    double radius = 0, eta = 0; ///< C and eta at the rebuild
+
+    // Anchored again since the rebuild (settle): by element index, moved (its entry in the grids
+    // above is stale; its current anchored box is in the overlay grid, by element index, if it is
+    // registered), and how many faces and edges moved. A vertex whose anchor is a position:
+    // anchored. faceAt0 / edgeAt0 hold {-1, ...} for an element not registered (never clean).
+    std::vector<char> movedV, movedF, movedE, anchored;
+    std::size_t movedFacesEdges = 0;
+    detail::BoxGrid overVertexGrid, overFaceGrid, overEdgeGrid;
+    std::vector<int> settleV, settleF, settleE;
 
     // This step's state. faceNow, edgeNow and the boxes are filled for every element at a rebuild
     // and for the dirty ones otherwise (the others' corners are faceAt0's, edgeAt0's).
@@ -373,14 +383,58 @@ struct SafeStepCache::Impl {
     void rebuild(const Mesh& mesh, const std::vector<Vec3>& start, double eta, double cell, double radiusFraction);
     void classify(const Mesh& mesh, const StepGeometry& g);
     void collect(const Mesh& mesh, const StepGeometry& g, std::vector<Quad>& candidates);
-    /// Clean: existed at the rebuild, is live, and no dirty or edited vertex is one of its corners.
+    void settle(Mesh& mesh, const StepGeometry& g, double motion, SafeStepStats& stats);
+    /// Clean: registered, is live, and no dirty or edited vertex is one of its corners.
     bool cleanFace(const Mesh& mesh, std::size_t f) const
     {
-        return f < faces0 && dirtyAtF[f] != stamp && !mesh.status(FaceHandle(int(f))).deleted();
+        return f < faceAt0.size() && faceAt0[f][0] >= 0 && dirtyAtF[f] != stamp &&
+               !mesh.status(FaceHandle(int(f))).deleted();
     }
     bool cleanEdge(const Mesh& mesh, std::size_t e) const
     {
-        return e < edges0 && dirtyAtE[e] != stamp && !mesh.status(EdgeHandle(int(e))).deleted();
+        return e < edgeAt0.size() && edgeAt0[e][0] >= 0 && dirtyAtE[e] != stamp &&
+               !mesh.status(EdgeHandle(int(e))).deleted();
+    }
+    /// The box around the anchors of the k vertices v, grown by `grow`.
+    Box6 anchoredBox(const int* v, int k, double grow) const
+    {
+        constexpr double inf = std::numeric_limits<double>::infinity();
+        Box6 b = {inf, inf, inf, -inf, -inf, -inf};
+        for (int i = 0; i < k; ++i)
+            for (int c = 0; c < 3; ++c) {
+                b[c] = std::min(b[c], anchor[std::size_t(v[i])][c] - grow);
+                b[c + 3] = std::max(b[c + 3], anchor[std::size_t(v[i])][c] + grow);
+            }
+        return b;
+    }
+    /// f(element) for every registered vertex, face or edge whose anchored box (grown as in the
+    /// grids) overlaps q: the rebuild's grid less the moved elements, and the overlay.
+    template <class F>
+    void queryVertices(const Box6& q, F&& f) const
+    {
+        vertexGrid.query(q, [&](int item) {
+            const int x = vertexOf[std::size_t(item)];
+            if (!movedV[std::size_t(x)]) f(x);
+        });
+        overVertexGrid.query(q, f);
+    }
+    template <class F>
+    void queryFaces(const Box6& q, F&& f) const
+    {
+        faceGrid.query(q, [&](int item) {
+            const int x = faceOf[std::size_t(item)];
+            if (!movedF[std::size_t(x)]) f(x);
+        });
+        overFaceGrid.query(q, f);
+    }
+    template <class F>
+    void queryEdges(const Box6& q, F&& f) const
+    {
+        edgeGrid.query(q, [&](int item) {
+            const int x = edgeOf[std::size_t(item)];
+            if (!movedE[std::size_t(x)]) f(x);
+        });
+        overEdgeGrid.query(q, f);
     }
 };
 
@@ -407,8 +461,11 @@ void SafeStepCache::Impl::candidates(Mesh& mesh, const StepGeometry& g, const Sa
     // The live faces and edges without a pass over them: split, collapse and flip keep the Euler
     // characteristic, and any other edit is followed by garbage collection and invalidate(); on
     // a closed triangle mesh E = 3 (V - chi) and F = 2 (V - chi).
+    // (Or when half of them have been anchored again since, see settle: the rebuild's grids are
+    // then mostly stale.)
     const double liveFacesEdges = 5.0 * (double(liveV) - double(chi0));
-    if (!rebuilt && double(dirtyF.size() + dirtyE.size()) > options.rebuildFraction * liveFacesEdges) {
+    if (!rebuilt && (double(dirtyF.size() + dirtyE.size()) > options.rebuildFraction * liveFacesEdges ||
+                     double(movedFacesEdges) > 2 * options.rebuildFraction * liveFacesEdges)) {
         anchorHere(mesh, g, options.clearance);
         classify(mesh, g);
         rebuilt = true;
@@ -464,9 +521,19 @@ void SafeStepCache::Impl::rebuild(const Mesh& mesh, const std::vector<Vec3>& sta
     vertices0 = mesh.n_vertices();
     faces0 = mesh.n_faces();
     edges0 = mesh.n_edges();
+    radius = C;
+    this->eta = eta;
     anchor.assign(start.begin(), start.begin() + std::ptrdiff_t(vertices0));
+    anchored.assign(vertices0, 1);
     faceAt0 = faceNow;
     edgeAt0 = edgeNow;
+    movedV.assign(vertices0, 0);
+    movedF.assign(faces0, 0);
+    movedE.assign(edges0, 0);
+    movedFacesEdges = 0;
+    overVertexGrid.reset(cell, 1024, vertices0);
+    overFaceGrid.reset(cell, 4096, faces0);
+    overEdgeGrid.reset(cell, 4096, edges0);
     auto boxAround = [&](const int* v, int k, double grow) {
         constexpr double inf = std::numeric_limits<double>::infinity();
         Box6 b = {inf, inf, inf, -inf, -inf, -inf};
@@ -537,6 +604,137 @@ void SafeStepCache::Impl::rebuild(const Mesh& mesh, const std::vector<Vec3>& sta
     }
 }
 
+void SafeStepCache::Impl::settle(Mesh& mesh, const StepGeometry& g, double motion, SafeStepStats& stats)
+{
+    // The vertices searched this step (out of their clearance, or edited) that have come to rest
+    // are anchored again where they end, with their faces and edges as they are now: they are
+    // clean from the next step on instead of until the next rebuild. Every pair of a registered
+    // vertex and face, or of two registered edges, sharing no vertex, keeps a distance at their
+    // anchors of at least eta + the largest allowed drift of each one's corners (which is what
+    // makes a pair of clean elements safe, see rebuild). The pairs with an element that changes
+    // here are measured again, and every corner of a pair closer than C has its allowed drift
+    // lowered to half the distance less eta (the rest already allow no more than (C - eta) / 2).
+    OpenMesh::VPropHandleT<char> edited;
+    const bool marks = mesh.get_property_handle(edited, kEditedProperty);
+    const std::size_t nv = mesh.n_vertices(), nf = mesh.n_faces(), ne = mesh.n_edges();
+    anchor.resize(std::max(anchor.size(), nv), Vec3::Zero());
+    allowed2.resize(std::max(allowed2.size(), nv), -1.0);
+    anchored.resize(std::max(anchored.size(), nv), 0);
+    movedV.resize(std::max(movedV.size(), nv), 0);
+    faceAt0.resize(std::max(faceAt0.size(), nf), {-1, -1, -1});
+    movedF.resize(std::max(movedF.size(), nf), 0);
+    edgeAt0.resize(std::max(edgeAt0.size(), ne), {-1, -1});
+    movedE.resize(std::max(movedE.size(), ne), 0);
+    settleV.clear();
+    for (const int i : seeds) {
+        const VertexHandle v(i);
+        if (mesh.status(v).deleted() || (position(mesh, v) - g.start[std::size_t(i)]).squaredNorm() > motion * motion)
+            continue;
+        settleV.push_back(i);
+    }
+    stats.settled = settleV.size();
+    if (settleV.empty()) return;
+    const double most = 0.5 * (radius - eta) * (1 - 1e-9);
+    for (const int i : settleV) {
+        const VertexHandle v(i);
+        anchor[std::size_t(i)] = position(mesh, v);
+        anchored[std::size_t(i)] = 1;
+        allowed2[std::size_t(i)] = most > 0 ? most * most : -1.0;
+        movedV[std::size_t(i)] = 1;
+        overVertexGrid.insert(i, anchoredBox(&i, 1, 0.5 * radius));
+        if (marks) mesh.property(edited, v) = 0; // (its faces and edges are registered below)
+    }
+    // Their faces and edges, each once, registered as they are (unless a corner has no anchor yet:
+    // then not registered, and so never clean, until it has).
+    if (++stamp == 0) {
+        std::fill(seenF.begin(), seenF.end(), 0u), std::fill(dirtyAtF.begin(), dirtyAtF.end(), 0u);
+        std::fill(seenE.begin(), seenE.end(), 0u), std::fill(dirtyAtE.begin(), dirtyAtE.end(), 0u);
+        stamp = 1;
+    }
+    seenF.resize(std::max(seenF.size(), nf), 0u);
+    seenE.resize(std::max(seenE.size(), ne), 0u);
+    settleF.clear();
+    settleE.clear();
+    auto registrable = [&](const int* c, int k) {
+        for (int j = 0; j < k; ++j)
+            if (!anchored[std::size_t(c[j])]) return false;
+        return true;
+    };
+    for (const int i : settleV) {
+        const VertexHandle v(i);
+        for (auto f = mesh.cvf_begin(v); f.is_valid(); ++f) {
+            const std::size_t x = std::size_t(f->idx());
+            if (seenF[x] == stamp) continue;
+            seenF[x] = stamp;
+            const std::array<int, 3> t = faceIds(mesh, *f);
+            faceAt0[x] = registrable(t.data(), 3) ? t : std::array<int, 3>{-1, -1, -1};
+            movedFacesEdges += !movedF[x];
+            movedF[x] = 1;
+            if (faceAt0[x][0] < 0) {
+                overFaceGrid.erase(int(x));
+                continue;
+            }
+            overFaceGrid.insert(int(x), anchoredBox(t.data(), 3, 0.5 * radius + eta));
+            settleF.push_back(int(x));
+        }
+        for (auto e = mesh.cve_begin(v); e.is_valid(); ++e) {
+            const std::size_t x = std::size_t(e->idx());
+            if (seenE[x] == stamp) continue;
+            seenE[x] = stamp;
+            const HalfedgeHandle h = mesh.halfedge_handle(*e, 0);
+            const std::array<int, 2> c = {mesh.from_vertex_handle(h).idx(), mesh.to_vertex_handle(h).idx()};
+            edgeAt0[x] = registrable(c.data(), 2) ? c : std::array<int, 2>{-1, -1};
+            movedFacesEdges += !movedE[x];
+            movedE[x] = 1;
+            if (edgeAt0[x][0] < 0) {
+                overEdgeGrid.erase(int(x));
+                continue;
+            }
+            overEdgeGrid.insert(int(x), anchoredBox(c.data(), 2, 0.5 * radius + 0.5 * eta));
+            settleE.push_back(int(x));
+        }
+    }
+    // The pairs closer than C with a vertex, face or edge registered here (some twice: the lower
+    // drift is the same).
+    const double C = radius, C2 = C * C;
+    near.clear();
+    findInChunks(settleV.size(), nearLists, near, [&](std::size_t k, std::vector<Near>& found) {
+        const int i = settleV[k];
+        const Vec3& p = anchor[std::size_t(i)];
+        queryFaces(anchoredBox(&i, 1, std::max(0.0, 0.5 * C - eta)), [&](int f) {
+            const auto& t = faceAt0[std::size_t(f)];
+            if (t[0] < 0 || hasCorner(t, i) || mesh.status(FaceHandle(f)).deleted()) return;
+            const double d2 = pointTriangleDistanceSquared(p, anchor[std::size_t(t[0])], anchor[std::size_t(t[1])],
+                                                           anchor[std::size_t(t[2])]);
+            if (d2 < C2) found.push_back({{i, t[0], t[1], t[2]}, std::sqrt(d2)});
+        });
+    });
+    findInChunks(settleF.size(), nearLists, near, [&](std::size_t k, std::vector<Near>& found) {
+        const auto& t = faceAt0[std::size_t(settleF[k])];
+        queryVertices(anchoredBox(t.data(), 3, 0.5 * C), [&](int i) {
+            if (hasCorner(t, i) || !anchored[std::size_t(i)] || mesh.status(VertexHandle(i)).deleted()) return;
+            const double d2 = pointTriangleDistanceSquared(anchor[std::size_t(i)], anchor[std::size_t(t[0])],
+                                                           anchor[std::size_t(t[1])], anchor[std::size_t(t[2])]);
+            if (d2 < C2) found.push_back({{i, t[0], t[1], t[2]}, std::sqrt(d2)});
+        });
+    });
+    findInChunks(settleE.size(), nearLists, near, [&](std::size_t k, std::vector<Near>& found) {
+        const auto& x = edgeAt0[std::size_t(settleE[k])];
+        queryEdges(anchoredBox(x.data(), 2, std::max(0.0, 0.5 * C - 0.5 * eta)), [&](int h) {
+            const auto& y = edgeAt0[std::size_t(h)];
+            if (y[0] < 0 || shareVertex(x, y) || mesh.status(EdgeHandle(h)).deleted()) return;
+            const double d2 = segmentSegmentDistanceSquared(anchor[std::size_t(x[0])], anchor[std::size_t(x[1])],
+                                                            anchor[std::size_t(y[0])], anchor[std::size_t(y[1])]);
+            if (d2 < C2) found.push_back({{x[0], x[1], y[0], y[1]}, std::sqrt(d2)});
+        });
+    });
+    for (const Near& n : near) {
+        const double drift = 0.5 * (n.d - eta) * (1 - 1e-9);
+        const double d2 = drift > 0 ? drift * drift : -1.0;
+        for (const int v : n.v) allowed2[std::size_t(v)] = std::min(allowed2[std::size_t(v)], d2);
+    }
+}
+
 void SafeStepCache::Impl::classify(const Mesh& mesh, const StepGeometry& g)
 {
     if (++stamp == 0) { // (wrapped: forget every stamp)
@@ -547,7 +745,7 @@ void SafeStepCache::Impl::classify(const Mesh& mesh, const StepGeometry& g)
     // The vertices' flags in parallel, then the dirty ones in index order.
     cleanV.assign(mesh.n_vertices(), 0);
     forLive<VertexHandle>(mesh, mesh.n_vertices(), [&](std::size_t i) {
-        cleanV[i] = i < vertices0 && (g.start[i] - anchor[i]).squaredNorm() < allowed2[i] &&
+        cleanV[i] = i < allowed2.size() && (g.start[i] - anchor[i]).squaredNorm() < allowed2[i] &&
                     (g.end[i] - anchor[i]).squaredNorm() < allowed2[i];
     });
     OpenMesh::VPropHandleT<char> edited;
@@ -570,6 +768,8 @@ void SafeStepCache::Impl::classify(const Mesh& mesh, const StepGeometry& g)
     for (auto* x : {&seenE, &dirtyAtE}) x->resize(std::max(x->size(), ne), 0u);
     faceNow.resize(std::max(faceNow.size(), nf)); // (each its own: a rebuild sizes some of them)
     edgeNow.resize(std::max(edgeNow.size(), ne));
+    movedF.resize(std::max(movedF.size(), nf), 0);
+    movedE.resize(std::max(movedE.size(), ne), 0);
     faceBox.resize(std::max(faceBox.size(), nf));
     edgeBox.resize(std::max(edgeBox.size(), ne));
     auto clean = [&](const int* v, int k) {
@@ -584,7 +784,16 @@ void SafeStepCache::Impl::classify(const Mesh& mesh, const StepGeometry& g)
         if (seenF[f] == stamp || mesh.status(fh).deleted()) return;
         seenF[f] = stamp;
         const std::array<int, 3> t = faceIds(mesh, fh);
-        if (f < faces0 && t == faceAt0[f] && clean(t.data(), 3)) return;
+        if (f < faceAt0.size() && faceAt0[f][0] >= 0) {
+            if (t == faceAt0[f]) {
+                if (clean(t.data(), 3)) return;
+            } else { // edited: no longer registered (its pairs are measured again when it is, see settle)
+                faceAt0[f] = {-1, -1, -1};
+                movedFacesEdges += !movedF[f];
+                movedF[f] = 1;
+                overFaceGrid.erase(int(f));
+            }
+        }
         dirtyAtF[f] = stamp;
         faceNow[f] = t;
         dirtyF.push_back(int(f));
@@ -595,7 +804,16 @@ void SafeStepCache::Impl::classify(const Mesh& mesh, const StepGeometry& g)
         seenE[e] = stamp;
         const HalfedgeHandle h = mesh.halfedge_handle(eh, 0);
         const std::array<int, 2> x = {mesh.from_vertex_handle(h).idx(), mesh.to_vertex_handle(h).idx()};
-        if (e < edges0 && x == edgeAt0[e] && clean(x.data(), 2)) return;
+        if (e < edgeAt0.size() && edgeAt0[e][0] >= 0) {
+            if (x == edgeAt0[e]) {
+                if (clean(x.data(), 2)) return;
+            } else {
+                edgeAt0[e] = {-1, -1};
+                movedFacesEdges += !movedE[e];
+                movedE[e] = 1;
+                overEdgeGrid.erase(int(e));
+            }
+        }
         dirtyAtE[e] = stamp;
         edgeNow[e] = x;
         dirtyE.push_back(int(e));
@@ -626,8 +844,8 @@ void SafeStepCache::Impl::collect(const Mesh& mesh, const StepGeometry& g, std::
         auto consider = [&](const std::array<int, 3>& t, const Box6& box) {
             if (!hasCorner(t, i) && detail::boxesOverlap(b, box) && g.vertexFace(i, t)) found.push_back(vertexFaceQuad(i, t));
         };
-        faceGrid.query(b, [&](int item) {
-            const std::size_t f = std::size_t(faceOf[std::size_t(item)]);
+        queryFaces(b, [&](int x) {
+            const std::size_t f = std::size_t(x);
             if (cleanFace(mesh, f)) consider(faceAt0[f], g.faceBox(faceAt0[f]));
         });
         dirtyGrid.query(b, [&](int item) {
@@ -639,8 +857,7 @@ void SafeStepCache::Impl::collect(const Mesh& mesh, const StepGeometry& g, std::
     findInChunks(dirtyF.size(), lists, candidates, [&](std::size_t k, std::vector<Quad>& found) {
         const std::size_t f = std::size_t(dirtyF[k]);
         const auto& t = faceNow[f];
-        vertexGrid.query(faceBox[f], [&](int item) {
-            const int i = vertexOf[std::size_t(item)];
+        queryVertices(faceBox[f], [&](int i) {
             if (std::size_t(i) >= cleanV.size() || !cleanV[std::size_t(i)] || hasCorner(t, i)) return;
             if (detail::boxesOverlap(g.vertexBox(i), faceBox[f]) && g.vertexFace(i, t)) found.push_back(vertexFaceQuad(i, t));
         });
@@ -656,8 +873,8 @@ void SafeStepCache::Impl::collect(const Mesh& mesh, const StepGeometry& g, std::
             if (!shareVertex(x, y) && detail::boxesOverlap(edgeBox[e], box) && (e < h ? g.edgeEdge(x, y) : g.edgeEdge(y, x)))
                 found.push_back(e < h ? edgeEdgeQuad(x, y) : edgeEdgeQuad(y, x)); // (in index order, as from scratch)
         };
-        edgeGrid.query(edgeBox[e], [&](int item) {
-            const std::size_t h = std::size_t(edgeOf[std::size_t(item)]);
+        queryEdges(edgeBox[e], [&](int x) {
+            const std::size_t h = std::size_t(x);
             if (cleanEdge(mesh, h)) consider(h, edgeAt0[h], g.edgeBox(edgeAt0[h]));
         });
         dirtyGrid.query(edgeBox[e], [&](int item) {
@@ -734,6 +951,7 @@ SafeStepStats limitStepToCollisionFree(Mesh& mesh, const std::vector<Vec3>& star
     // leave them out of their clearance however they were anchored: it is searched from scratch,
     // and the mesh anchored later.
     std::size_t far = 0;
+    bool cached = false;
     if (cache) {
         const double farMotion = options.farMotion * cell;
         for (int i : live) far += reach[std::size_t(i)] > farMotion;
@@ -745,6 +963,7 @@ SafeStepStats limitStepToCollisionFree(Mesh& mesh, const std::vector<Vec3>& star
                       scratch.lists, candidates);
     } else {
         cache->impl().candidates(mesh, g, options, candidates, stats);
+        cached = true;
     }
     stats.candidates = candidates.size();
 
@@ -808,6 +1027,7 @@ SafeStepStats limitStepToCollisionFree(Mesh& mesh, const std::vector<Vec3>& star
         mesh.set_point(v, toPoint(at(v.idx())));
         if (hasVelocity) mesh.property(velocity, v) *= alpha[i];
     }
+    if (cached) cache->impl().settle(mesh, g, options.farMotion * cell, stats);
     return stats;
 }
 

@@ -56,7 +56,8 @@ OpenMesh::VPropHandleT<OpenMesh::Vec3d> velocityProperty(Mesh& mesh);
 /// Name of the per-vertex edit mark (char). When a mesh has it, split, collapse and flip
 /// (riemesh/edge_ops.h) set it on every vertex whose faces or edges they change (a face or an
 /// edge whose corners changed has a marked corner). SafeStepCache (riemesh/ccd.h) adds it and
-/// clears it whenever it anchors the mesh, to find the edited faces without comparing them all.
+/// clears it whenever it anchors the mesh (and on the vertices it anchors again), to find the
+/// edited faces without comparing them all.
 /// Any other edit of the connectivity must either mark its vertices or be followed by
 /// garbage_collection() and SafeStepCache::invalidate().
 inline constexpr const char* kEditedProperty = "riemesh:edited";

@@ -5,8 +5,8 @@
 // cells of side cellSize, hashed into power-of-two buckets, chained). query(box, f) calls f(item)
 // once for every item whose current box overlaps `box`: an item is reported only in the cell of the
 // lower corner of the two boxes' intersection, so an item met in several cells is reported once.
-// Inserting an item again (its box changed) adds entries for its new box; the old ones stay but
-// are filtered by the item's current box (an item may then be reported twice: callers tolerate it).
+// Inserting an item again (its box changed) adds entries for its new box; the old ones stay,
+// skipped (each entry carries the insertion it belongs to).
 // Deterministic: the order of the reports depends only on the insertions. Private to core/src.
 #pragma once
 
@@ -68,6 +68,8 @@ public:
         mEntries.reserve(entries);
         mBox.assign(items, kEmpty);
         mIsLarge.assign(items, 0);
+        mListed.assign(items, 0);
+        mInsertion.assign(items, 0);
         mLarge.clear();
     }
 
@@ -77,12 +79,16 @@ public:
         if (std::size_t(item) >= mBox.size()) {
             mBox.resize(std::size_t(item) + 1, kEmpty);
             mIsLarge.resize(std::size_t(item) + 1, 0);
+            mListed.resize(std::size_t(item) + 1, 0);
+            mInsertion.resize(std::size_t(item) + 1, 0);
         }
         mBox[std::size_t(item)] = box;
+        const std::int32_t insertion = ++mInsertion[std::size_t(item)]; // (the earlier entries are stale)
         std::array<std::int64_t, 6> c{};
         mIsLarge[std::size_t(item)] = !cellRange(box, c);
         if (mIsLarge[std::size_t(item)]) {
-            mLarge.push_back(item);
+            if (!mListed[std::size_t(item)]) mLarge.push_back(item);
+            mListed[std::size_t(item)] = 1;
             return;
         }
         for (std::int64_t x = c[0]; x <= c[3]; ++x)
@@ -90,7 +96,7 @@ public:
                 for (std::int64_t z = c[2]; z <= c[5]; ++z) {
                     const std::uint64_t key = packCell(x, y, z);
                     std::int32_t& head = mHead[bucket(key)];
-                    mEntries.push_back({key, item, head});
+                    mEntries.push_back({key, item, head, insertion});
                     head = std::int32_t(mEntries.size() - 1);
                 }
     }
@@ -124,7 +130,7 @@ public:
                     const std::uint64_t key = packCell(x, y, z);
                     for (std::int32_t e = mHead[bucket(key)]; e >= 0; e = mEntries[std::size_t(e)].next) {
                         const Entry& entry = mEntries[std::size_t(e)];
-                        if (entry.key != key) continue;
+                        if (entry.key != key || entry.insertion != mInsertion[std::size_t(entry.item)]) continue;
                         const Box6& b = mBox[std::size_t(entry.item)];
                         if (!boxesOverlap(q, b) || mIsLarge[std::size_t(entry.item)]) continue;
                         // Report in the cell of the intersection's lower corner only.
@@ -141,6 +147,7 @@ private:
         std::uint64_t key;
         std::int32_t item;
         std::int32_t next;
+        std::int32_t insertion; ///< the item's insertion that made it (stale unless the latest)
     };
     static constexpr Box6 kEmpty = {1, 1, 1, -1, -1, -1}; // overlaps nothing
     /// Boxes spanning more cells than this on an axis are kept in mLarge, tested by every query.
@@ -166,7 +173,9 @@ private:
     std::vector<Entry> mEntries;
     std::vector<Box6> mBox;
     std::vector<char> mIsLarge; ///< by item: its current box is in mLarge
-    std::vector<int> mLarge; ///< items whose box spans too many cells: tested by every query
+    std::vector<char> mListed;  ///< by item: in mLarge (once, even if no longer large)
+    std::vector<std::int32_t> mInsertion; ///< by item: how many times it was inserted
+    std::vector<int> mLarge; ///< items whose box spans (or spanned) too many cells: tested by every query
 };
 
 /// A hashed grid of boxes entered once each, in the cell of its box's centre (cubic cells of side
