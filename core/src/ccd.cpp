@@ -289,32 +289,41 @@ void findInChunks(std::size_t count, std::vector<std::vector<T>>& lists, std::ve
     for (std::size_t c = 0; c < chunks; ++c) out.insert(out.end(), lists[c].begin(), lists[c].end());
 }
 
+/// Builds grids from boxes (cells of `cell`), each on a thread of its own when there are several.
+template <std::size_t N>
+void buildGrids(const std::array<std::pair<const std::vector<Box6>*, detail::PackedBoxGrid*>, N>& jobs, double cell)
+{
+    detail::parallelFor(0, N, 1, [&](std::size_t k) { jobs[k].second->build(*jobs[k].first, cell); });
+}
+
 /// The broad phase of one step from scratch: every vertex-face and edge-edge pair whose swept
 /// boxes (the face's grown by eta, the edges' by eta / 2 each) overlap and that is within reach.
 void allCandidates(const StepGeometry& g, const std::vector<int>& live, const std::vector<std::array<int, 3>>& faces,
                    const std::vector<std::array<int, 2>>& edges, double cell, std::vector<Box6>& faceBox,
-                   std::vector<Box6>& edgeBox, detail::PackedBoxGrid& grid, std::vector<std::vector<Quad>>& lists,
-                   std::vector<Quad>& candidates)
+                   std::vector<Box6>& edgeBox, std::array<detail::PackedBoxGrid, 2>& grids,
+                   std::vector<std::vector<Quad>>& lists, std::vector<Quad>& candidates)
 {
     faceBox.resize(faces.size());
     detail::parallelFor(0, faces.size(), kPassGrain, [&](std::size_t f) { faceBox[f] = g.faceBox(faces[f]); });
-    grid.build(faceBox, cell);
+    edgeBox.resize(edges.size());
+    detail::parallelFor(0, edges.size(), kPassGrain, [&](std::size_t e) { edgeBox[e] = g.edgeBox(edges[e]); });
+    // The two grids at once, each on one thread (building one is serial).
+    detail::PackedBoxGrid& faceGrid = grids[0];
+    detail::PackedBoxGrid& edgeGrid = grids[1];
+    buildGrids<2>({{{&faceBox, &faceGrid}, {&edgeBox, &edgeGrid}}}, cell);
     findInChunks(live.size(), lists, candidates, [&](std::size_t k, std::vector<Quad>& found) {
         const int i = live[k];
         const Box6 b = g.vertexBox(i);
-        grid.query(b, [&](int f) {
+        faceGrid.query(b, [&](int f) {
             const auto& t = faces[std::size_t(f)];
             // (the grid's float boxes are a little larger: the exact boxes decide)
             if (hasCorner(t, i) || !detail::boxesOverlap(b, faceBox[std::size_t(f)]) || !g.vertexFace(i, t)) return;
             found.push_back(vertexFaceQuad(i, t));
         });
     });
-    edgeBox.resize(edges.size());
-    detail::parallelFor(0, edges.size(), kPassGrain, [&](std::size_t e) { edgeBox[e] = g.edgeBox(edges[e]); });
-    grid.build(edgeBox, cell);
     findInChunks(edges.size(), lists, candidates, [&](std::size_t e, std::vector<Quad>& found) {
         const auto& x = edges[e];
-        grid.query(edgeBox[e], [&](int h) { // each pair once: from its lower edge
+        edgeGrid.query(edgeBox[e], [&](int h) { // each pair once: from its lower edge
             const auto& y = edges[std::size_t(h)];
             if (shareVertex(x, y) || !detail::boxesOverlap(edgeBox[e], edgeBox[std::size_t(h)]) || !g.edgeEdge(x, y))
                 return;
@@ -367,6 +376,7 @@ struct SafeStepCache::Impl {
     std::vector<unsigned> seenF, seenE, dirtyAtF, dirtyAtE;
     unsigned stamp = 0;
     std::vector<Box6> dirtyBox;
+    std::array<std::vector<Box6>, 3> anchoredBoxes; ///< the rebuild's boxes (vertices, faces, edges)
     detail::PackedBoxGrid dirtyGrid;
     struct Near { ///< a pair closer than C at the rebuild: its four vertices and distance
         std::array<int, 4> v;
@@ -545,16 +555,14 @@ void SafeStepCache::Impl::rebuild(const Mesh& mesh, const std::vector<Vec3>& sta
         return b;
     };
     const double faceGrow = 0.5 * C + eta, edgeGrow = 0.5 * C + 0.5 * eta;
-    std::vector<Box6>& boxes = dirtyBox; // (a buffer here)
     vertexOf.clear();
-    boxes.clear();
+    anchoredBoxes[0].clear();
     for (auto v : mesh.vertices()) {
         const int i = v.idx();
         vertexOf.push_back(i);
-        boxes.push_back(boxAround(&i, 1, 0.5 * C));
+        anchoredBoxes[0].push_back(boxAround(&i, 1, 0.5 * C));
     }
-    vertexGrid.build(boxes, cell);
-    auto anchoredGrid = [&](const auto& corners, std::vector<int>& of, detail::PackedBoxGrid& grid, double grow) {
+    auto boxesOf = [&](const auto& corners, std::vector<int>& of, std::vector<Box6>& boxes, double grow) {
         of.clear();
         boxes.clear();
         for (std::size_t x = 0; x < corners.size(); ++x)
@@ -562,10 +570,11 @@ void SafeStepCache::Impl::rebuild(const Mesh& mesh, const std::vector<Vec3>& sta
                 of.push_back(int(x));
                 boxes.push_back(boxAround(corners[x].data(), int(corners[x].size()), grow));
             }
-        grid.build(boxes, cell);
     };
-    anchoredGrid(faceAt0, faceOf, faceGrid, faceGrow);
-    anchoredGrid(edgeAt0, edgeOf, edgeGrid, edgeGrow);
+    boxesOf(faceAt0, faceOf, anchoredBoxes[1], faceGrow);
+    boxesOf(edgeAt0, edgeOf, anchoredBoxes[2], edgeGrow);
+    buildGrids<3>({{{&anchoredBoxes[0], &vertexGrid}, {&anchoredBoxes[1], &faceGrid}, {&anchoredBoxes[2], &edgeGrid}}},
+                  cell);
     // The pairs closer than C: query boxes grown so that, with the grids' growth, they meet every
     // primitive whose own box is within C.
     const double C2 = C * C;
@@ -903,7 +912,7 @@ SafeStepStats limitStepToCollisionFree(Mesh& mesh, const std::vector<Vec3>& star
         std::vector<Quad> candidates;
         std::vector<std::vector<Quad>> lists;
         std::vector<int> live;
-        detail::PackedBoxGrid grid;
+        std::array<detail::PackedBoxGrid, 2> grids;
     };
     static thread_local Scratch scratch;
     std::vector<Vec3>& end = scratch.end;
@@ -959,7 +968,7 @@ SafeStepStats limitStepToCollisionFree(Mesh& mesh, const std::vector<Vec3>& star
     if (!cache || double(far) > 0.5 * options.rebuildFraction * double(live.size())) {
         if (cache) cache->invalidate();
         collectPrimitives(mesh, scratch.faces, scratch.edges);
-        allCandidates(g, live, scratch.faces, scratch.edges, cell, scratch.faceBox, scratch.edgeBox, scratch.grid,
+        allCandidates(g, live, scratch.faces, scratch.edges, cell, scratch.faceBox, scratch.edgeBox, scratch.grids,
                       scratch.lists, candidates);
     } else {
         cache->impl().candidates(mesh, g, options, candidates, stats);
