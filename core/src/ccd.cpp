@@ -420,32 +420,21 @@ struct SafeStepCache::Impl {
     /// f(element) for every registered vertex, face or edge whose anchored box (grown as in the
     /// grids) overlaps q: the rebuild's grid less the moved elements, and the overlay.
     template <class F>
-    void queryVertices(const Box6& q, F&& f) const
+    static void queryAnchored(const detail::PackedBoxGrid& grid, const std::vector<int>& of,
+                              const std::vector<char>& moved, const detail::BoxGrid& overlay, const Box6& q, F&& f)
     {
-        vertexGrid.query(q, [&](int item) {
-            const int x = vertexOf[std::size_t(item)];
-            if (!movedV[std::size_t(x)]) f(x);
+        grid.query(q, [&](int item) {
+            const int x = of[std::size_t(item)];
+            if (!moved[std::size_t(x)]) f(x);
         });
-        overVertexGrid.query(q, f);
+        overlay.query(q, f);
     }
     template <class F>
-    void queryFaces(const Box6& q, F&& f) const
-    {
-        faceGrid.query(q, [&](int item) {
-            const int x = faceOf[std::size_t(item)];
-            if (!movedF[std::size_t(x)]) f(x);
-        });
-        overFaceGrid.query(q, f);
-    }
+    void queryVertices(const Box6& q, F&& f) const { queryAnchored(vertexGrid, vertexOf, movedV, overVertexGrid, q, f); }
     template <class F>
-    void queryEdges(const Box6& q, F&& f) const
-    {
-        edgeGrid.query(q, [&](int item) {
-            const int x = edgeOf[std::size_t(item)];
-            if (!movedE[std::size_t(x)]) f(x);
-        });
-        overEdgeGrid.query(q, f);
-    }
+    void queryFaces(const Box6& q, F&& f) const { queryAnchored(faceGrid, faceOf, movedF, overFaceGrid, q, f); }
+    template <class F>
+    void queryEdges(const Box6& q, F&& f) const { queryAnchored(edgeGrid, edgeOf, movedE, overEdgeGrid, q, f); }
 };
 
 SafeStepCache::SafeStepCache() : mImpl(std::make_unique<Impl>()) {}
@@ -544,23 +533,13 @@ void SafeStepCache::Impl::rebuild(const Mesh& mesh, const std::vector<Vec3>& sta
     overVertexGrid.reset(cell, 1024, vertices0);
     overFaceGrid.reset(cell, 4096, faces0);
     overEdgeGrid.reset(cell, 4096, edges0);
-    auto boxAround = [&](const int* v, int k, double grow) {
-        constexpr double inf = std::numeric_limits<double>::infinity();
-        Box6 b = {inf, inf, inf, -inf, -inf, -inf};
-        for (int i = 0; i < k; ++i)
-            for (int c = 0; c < 3; ++c) {
-                b[c] = std::min(b[c], anchor[std::size_t(v[i])][c] - grow);
-                b[c + 3] = std::max(b[c + 3], anchor[std::size_t(v[i])][c] + grow);
-            }
-        return b;
-    };
     const double faceGrow = 0.5 * C + eta, edgeGrow = 0.5 * C + 0.5 * eta;
     vertexOf.clear();
     anchoredBoxes[0].clear();
     for (auto v : mesh.vertices()) {
         const int i = v.idx();
         vertexOf.push_back(i);
-        anchoredBoxes[0].push_back(boxAround(&i, 1, 0.5 * C));
+        anchoredBoxes[0].push_back(anchoredBox(&i, 1, 0.5 * C));
     }
     auto boxesOf = [&](const auto& corners, std::vector<int>& of, std::vector<Box6>& boxes, double grow) {
         of.clear();
@@ -568,7 +547,7 @@ void SafeStepCache::Impl::rebuild(const Mesh& mesh, const std::vector<Vec3>& sta
         for (std::size_t x = 0; x < corners.size(); ++x)
             if (corners[x][0] >= 0) { // (live)
                 of.push_back(int(x));
-                boxes.push_back(boxAround(corners[x].data(), int(corners[x].size()), grow));
+                boxes.push_back(anchoredBox(corners[x].data(), int(corners[x].size()), grow));
             }
     };
     boxesOf(faceAt0, faceOf, anchoredBoxes[1], faceGrow);
@@ -582,7 +561,7 @@ void SafeStepCache::Impl::rebuild(const Mesh& mesh, const std::vector<Vec3>& sta
     findInChunks(vertexOf.size(), nearLists, near, [&](std::size_t k, std::vector<Near>& found) {
         const int i = vertexOf[k];
         const Vec3& p = anchor[std::size_t(i)];
-        faceGrid.query(boxAround(&i, 1, std::max(0.0, C - faceGrow)), [&](int item) {
+        faceGrid.query(anchoredBox(&i, 1, std::max(0.0, C - faceGrow)), [&](int item) {
             const int f = faceOf[std::size_t(item)];
             const auto& t = faceAt0[std::size_t(f)];
             if (hasCorner(t, i)) return;
@@ -594,7 +573,7 @@ void SafeStepCache::Impl::rebuild(const Mesh& mesh, const std::vector<Vec3>& sta
     findInChunks(edgeOf.size(), nearLists, near, [&](std::size_t k, std::vector<Near>& found) {
         const int e = edgeOf[k];
         const auto& x = edgeAt0[std::size_t(e)];
-        edgeGrid.query(boxAround(x.data(), 2, std::max(0.0, C - edgeGrow)), [&](int item) {
+        edgeGrid.query(anchoredBox(x.data(), 2, std::max(0.0, C - edgeGrow)), [&](int item) {
             const int h = edgeOf[std::size_t(item)];
             const auto& y = edgeAt0[std::size_t(h)];
             if (shareVertex(x, y)) return;
