@@ -6,6 +6,7 @@
 #include "detail/triangle_intersection.h"
 
 #include <algorithm>
+#include <limits>
 
 namespace riemesh::detail {
 
@@ -79,37 +80,55 @@ bool IntersectionGuard::crosses(const std::vector<Triangle>& made, const std::ar
                 tooClose(made[i].ids, made[i].p, made[j].ids, made[j].p))
                 return true;
         }
+    // The faces near any of them, from one query with the box around them all (each face is
+    // looked up once, where a query per new triangle met most of them several times), then each
+    // against the new triangles whose boxes (grown by the separation) overlap its own.
+    std::vector<Box6>& boxes = mMadeBoxes;
+    boxes.resize(made.size());
+    constexpr double inf = std::numeric_limits<double>::infinity();
+    Box6 all = {inf, inf, inf, -inf, -inf, -inf};
     for (std::size_t i = 0; i < made.size(); ++i) {
         const Triangle& t = made[i];
+        for (int k = 0; k < 3; ++k) {
+            boxes[i][k] = std::min({t.p[0][k], t.p[1][k], t.p[2][k]}) - mMinSeparation;
+            boxes[i][k + 3] = std::max({t.p[0][k], t.p[1][k], t.p[2][k]}) + mMinSeparation;
+            all[k] = std::min(all[k], boxes[i][k]);
+            all[k + 3] = std::max(all[k + 3], boxes[i][k + 3]);
+        }
+    }
+    mNear.clear();
+    mGrid.query(all, [&](int fi) { mNear.push_back(fi); });
+    for (const int fi : mNear) {
+        if (fi == goneFaces[0] || fi == goneFaces[1]) continue;
+        const FaceHandle f(fi);
+        if (mMesh.status(f).deleted()) continue;
+        const HalfedgeHandle h = mMesh.halfedge_handle(f);
+        const std::array<int, 3> ids = {mMesh.from_vertex_handle(h).idx(), mMesh.to_vertex_handle(h).idx(),
+                                        mMesh.to_vertex_handle(mMesh.next_halfedge_handle(h)).idx()};
+        if (std::any_of(ids.begin(), ids.end(), [&](int x) { return x == gone[0] || x == gone[1]; })) continue;
+        const std::array<const double*, 3> q = {mMesh.point(VertexHandle(ids[0])).data(),
+                                                mMesh.point(VertexHandle(ids[1])).data(),
+                                                mMesh.point(VertexHandle(ids[2])).data()};
         Box6 box;
         for (int k = 0; k < 3; ++k) {
-            box[k] = std::min({t.p[0][k], t.p[1][k], t.p[2][k]}) - mMinSeparation;
-            box[k + 3] = std::max({t.p[0][k], t.p[1][k], t.p[2][k]}) + mMinSeparation;
+            box[k] = std::min({q[0][k], q[1][k], q[2][k]});
+            box[k + 3] = std::max({q[0][k], q[1][k], q[2][k]});
         }
-        bool hit = false;
-        mGrid.query(box, [&](int fi) {
-            if (hit || fi == goneFaces[0] || fi == goneFaces[1]) return;
-            const FaceHandle f(fi);
-            if (mMesh.status(f).deleted()) return;
-            const HalfedgeHandle h = mMesh.halfedge_handle(f);
-            const std::array<int, 3> ids = {mMesh.from_vertex_handle(h).idx(), mMesh.to_vertex_handle(h).idx(),
-                                            mMesh.to_vertex_handle(mMesh.next_halfedge_handle(h)).idx()};
-            for (int x : ids)
-                if (x == gone[0] || x == gone[1]) return;
-            const std::array<const double*, 3> q = {mMesh.point(VertexHandle(ids[0])).data(),
-                                                    mMesh.point(VertexHandle(ids[1])).data(),
-                                                    mMesh.point(VertexHandle(ids[2])).data()};
-            if (separatedBeyondShared(t.ids, corners(t.p).data(), ids, q.data(), mMinSeparation)) return;
-            const TriangleRef ref = makeTriangle(q[0], q[1], q[2]);
-            if (ref.axis < 0) return; // a degenerate face: nothing to cross
-            if (classifyTriangles(t.ids, refs[i], ids, ref) != TriangleContact::None) hit = true;
-            else if (mMinSeparation > 0) {
-                const std::array<Vec3, 3> q = {position(mMesh, VertexHandle(ids[0])), position(mMesh, VertexHandle(ids[1])),
+        TriangleRef ref{};
+        bool haveRef = false;
+        for (std::size_t i = 0; i < made.size(); ++i) {
+            const Triangle& t = made[i];
+            if (!boxesOverlap(boxes[i], box)) continue;
+            if (separatedBeyondShared(t.ids, corners(t.p).data(), ids, q.data(), mMinSeparation)) continue;
+            if (!haveRef) ref = makeTriangle(q[0], q[1], q[2]), haveRef = true;
+            if (ref.axis < 0) break; // a degenerate face: nothing to cross
+            if (classifyTriangles(t.ids, refs[i], ids, ref) != TriangleContact::None) return true;
+            if (mMinSeparation > 0) {
+                const std::array<Vec3, 3> p = {position(mMesh, VertexHandle(ids[0])), position(mMesh, VertexHandle(ids[1])),
                                                position(mMesh, VertexHandle(ids[2]))};
-                hit = tooClose(t.ids, t.p, ids, q);
+                if (tooClose(t.ids, t.p, ids, p)) return true;
             }
-        });
-        if (hit) return true;
+        }
     }
     return false;
 }

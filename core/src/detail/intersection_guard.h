@@ -48,6 +48,8 @@ private:
     bool mBuilt = false;
     std::vector<Box6> mBoxes; // scratch
     std::vector<Triangle> mMade; // scratch
+    std::vector<int> mNear;      // scratch
+    std::vector<Box6> mMadeBoxes; // scratch
 };
 
 } // namespace riemesh::detail
