@@ -405,6 +405,15 @@ struct SafeStepCache::Impl {
         return e < edgeAt0.size() && edgeAt0[e][0] >= 0 && dirtyAtE[e] != stamp &&
                !mesh.status(EdgeHandle(int(e))).deleted();
     }
+    /// A stamp no element carries yet (classify's and settle's marks of this pass).
+    void nextStamp()
+    {
+        if (++stamp != 0) return;
+        // (wrapped: forget every stamp)
+        std::fill(seenF.begin(), seenF.end(), 0u), std::fill(dirtyAtF.begin(), dirtyAtF.end(), 0u);
+        std::fill(seenE.begin(), seenE.end(), 0u), std::fill(dirtyAtE.begin(), dirtyAtE.end(), 0u);
+        stamp = 1;
+    }
     /// The box around the anchors of the k vertices v, grown by `grow`.
     Box6 anchoredBox(const int* v, int k, double grow) const
     {
@@ -634,11 +643,7 @@ void SafeStepCache::Impl::settle(Mesh& mesh, const StepGeometry& g, double motio
     }
     // Their faces and edges, each once, registered as they are (unless a corner has no anchor yet:
     // then not registered, and so never clean, until it has).
-    if (++stamp == 0) {
-        std::fill(seenF.begin(), seenF.end(), 0u), std::fill(dirtyAtF.begin(), dirtyAtF.end(), 0u);
-        std::fill(seenE.begin(), seenE.end(), 0u), std::fill(dirtyAtE.begin(), dirtyAtE.end(), 0u);
-        stamp = 1;
-    }
+    nextStamp();
     seenF.resize(std::max(seenF.size(), nf), 0u);
     seenE.resize(std::max(seenE.size(), ne), 0u);
     settleF.clear();
@@ -725,11 +730,7 @@ void SafeStepCache::Impl::settle(Mesh& mesh, const StepGeometry& g, double motio
 
 void SafeStepCache::Impl::classify(const Mesh& mesh, const StepGeometry& g)
 {
-    if (++stamp == 0) { // (wrapped: forget every stamp)
-        std::fill(seenF.begin(), seenF.end(), 0u), std::fill(dirtyAtF.begin(), dirtyAtF.end(), 0u);
-        std::fill(seenE.begin(), seenE.end(), 0u), std::fill(dirtyAtE.begin(), dirtyAtE.end(), 0u);
-        stamp = 1;
-    }
+    nextStamp();
     // The vertices' flags in parallel, then the dirty ones in index order.
     cleanV.assign(mesh.n_vertices(), 0);
     forLive<VertexHandle>(mesh, mesh.n_vertices(), [&](std::size_t i) {
