@@ -326,6 +326,43 @@ TEST_CASE("evolution: a coarse Euclidean model punches through a thin plate, an 
     }
 }
 
+TEST_CASE("evolution: a schedule's coarse level does not merge through a thin plate, the finest level keeps it whole")
+{
+    // The plate above, evolved by a schedule whose coarse level is the punching model (delta 3).
+    // The sheets close on the plate from both sides in free flight and hold it at their middle
+    // sample only; a coarse level holds such pairs apart (keepSettledPairsApart), so no hole is
+    // punched that the finest level would have to grow shut.
+    auto plate = [](const Vec3& x) {
+        return std::min({1.5 - std::abs(x.z()), 20 - std::abs(x.x()), 20 - std::abs(x.y())});
+    };
+    const auto image = fogImage(plate, Box3(Vec3(-24, -24, -8), Vec3(24, 24, 8)));
+    EvolutionOptions o = baseOptions(1.0);
+    o.intersectionFree = true; // (whether punched sheets end embedded is round-off otherwise)
+    int coarseMerges = 0, coarseIterations = 0;
+    o.progress = [&](const IterationStats& it) {
+        if (it.level > 0) {
+            coarseMerges += it.merges;
+            ++coarseIterations;
+        }
+        return true;
+    };
+    Mesh mesh = makeInitialBox(image, 4.0);
+    EuclideanMetric euclidean;
+    const auto stats = evolve(mesh, std::vector<EvolutionLevel>{{&image, 3.0}, {&image, 1.0}}, euclidean, o);
+    REQUIRE_MESH_OK(mesh);
+    const auto t = topologyOf(mesh);
+    double far = 0;
+    for (auto v : mesh.vertices()) far = std::max(far, std::abs(plate(position(mesh, v))));
+    INFO("coarse iterations " << coarseIterations << ", coarse merges " << coarseMerges << ", merges " << stats.merges
+                              << ", farthest vertex " << far);
+    CHECK(coarseIterations > 0);
+    CHECK(coarseMerges == 0);
+    CHECK(toString(stats.reason) == std::string("converged"));
+    CHECK(t.components == 1);
+    CHECK(t.genus == 0);
+    CHECK(far < 1.0);
+}
+
 TEST_CASE("evolution: a closed cavity's inner wall survives the cuts elsewhere in the model")
 {
     // A hollow ball (walls between r = 3.5 and 7) and a solid ball beside it. The box deflates onto
