@@ -4,6 +4,7 @@
 #include "riemesh/edge_ops.h"
 
 #include "detail/edge_guards.h"
+#include "riemesh/integration.h"
 
 #include <algorithm>
 #include <cmath>
@@ -157,6 +158,18 @@ VertexHandle split(Mesh& mesh, EdgeHandle e, const Vec3& position)
     const OpenMesh::Vec3d mean = 0.5 * (mesh.property(velocity, u) + mesh.property(velocity, v));
     const VertexHandle w = mesh.add_vertex(toPoint(position));
     mesh.property(velocity, w) = mean;
+    OpenMesh::VPropHandleT<TravelAnchors> anchors;
+    if (mesh.get_property_handle(anchors, kTravelAnchorsProperty)) {
+        const TravelAnchors a = mesh.property(anchors, u), b = mesh.property(anchors, v);
+        TravelAnchors& c = mesh.property(anchors, w);
+        c = TravelAnchors{};
+        c.nowValid = a.nowValid && b.nowValid;
+        c.beforeValid = a.beforeValid && b.beforeValid;
+        for (int k = 0; k < 3; ++k) {
+            c.now[k] = 0.5 * (a.now[k] + b.now[k]);
+            c.before[k] = 0.5 * (a.before[k] + b.before[k]);
+        }
+    }
     mesh.split(e, w);
     markEdited(mesh, {u, v, w});
     return w;

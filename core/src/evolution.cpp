@@ -189,7 +189,8 @@ Evolution::Evolution(Mesh& mesh, std::vector<EvolutionLevel> levels, const Metri
     for (const auto& l : mLevels)
         if (!l.image || !(l.scale >= 1.0) || !std::isfinite(l.scale))
             throw std::invalid_argument("evolution: every level needs an image and a scale >= 1");
-    if (mOptions.coarseConvergenceWindow < 1 || mOptions.coarseMaxIterations < 1)
+    if (mOptions.coarseConvergenceWindow < 1 || mOptions.coarseMaxIterations < 1 || !(mOptions.coarseNetTravel >= 0) ||
+        !std::isfinite(mOptions.coarseNetTravel))
         throw std::invalid_argument("evolution: bad coarse-level limits");
     if (!(mOptions.coarseExternalLimit >= 0) || !std::isfinite(mOptions.coarseExternalLimit) ||
         !(mOptions.coarseFreeCurvatureFactor >= 0) || !std::isfinite(mOptions.coarseFreeCurvatureFactor))
@@ -413,6 +414,8 @@ IterationStats Evolution::step()
         mSafeStepCache.invalidate();
     }
 
+    const bool coarseLevel = mLevel + 1 < int(mLevels.size());
+    const std::size_t travellers = coarseLevel ? countTravellers(o, iteration, io.movingSpeed) : 0;
     it.iteration = iteration;
     it.level = level();
     it.removedComponents = removed;
@@ -428,6 +431,7 @@ IterationStats Evolution::step()
     phase(it.phases.topology);
     it.milliseconds = std::chrono::duration<double, std::milli>(lap - start).count();
     mHistory.push_back(it);
+    mTravellers.push_back(travellers);
     if (ts.merges || ts.cuts) mLastTopologyEvent = it.iteration;
 
     updateConvergence();
@@ -514,7 +518,7 @@ void Evolution::updateConvergence()
     // iterations to fill the cavity; now level 2 fills it, in 86).
     const int w = o.coarseConvergenceWindow;
     bool arrived = inLevel >= w;
-    for (int i = total - w; arrived && i < total; ++i) arrived = mHistory[i].moving == 0;
+    for (int i = total - w; arrived && i < total; ++i) arrived = mTravellers[std::size_t(i)] == 0;
     if (arrived || inLevel >= o.coarseMaxIterations) {
         const double scale = mLevels[mLevel].scale / mLevels.back().scale;
         mPredictedVertices = std::size_t(double(mHistory[total - 1].vertices) * scale * scale);
@@ -526,6 +530,7 @@ void Evolution::updateConvergence()
         if (mLevelMetrics[std::size_t(mLevel - 1)] || mLevelMetrics[std::size_t(mLevel)]) VertexMetrics::forget(mMesh);
         mSafeStepCache.invalidate(); // (a new delta: new clearances)
         mLevelStart = total;
+        mTravelBlockStart = -1; // (anchored again at the new level's first iteration)
     }
 }
 
@@ -567,11 +572,46 @@ void Evolution::restartFrom(const Mesh& initial, int total)
     mSafeStepCache.invalidate();
     mLevel = 0;
     mLevelStart = total;
+    mTravelBlockStart = -1;
     mLastTopologyEvent = total;
     mLastCut = mLastMerge = 0;
     mComponents = -1;
     mCutIdSeen = mHoldUntil = 0;
     mChurn = mMesh.n_vertices();
+}
+
+std::size_t Evolution::countTravellers(const EvolutionOptions& o, int iteration, double movingSpeed)
+{
+    OpenMesh::VPropHandleT<TravelAnchors> anchors;
+    if (!mMesh.get_property_handle(anchors, kTravelAnchorsProperty)) mMesh.add_property(anchors, kTravelAnchorsProperty);
+    OpenMesh::VPropHandleT<Drift> drift;
+    const bool haveDrift = mMesh.get_property_handle(drift, kDriftProperty);
+    const bool start = mTravelBlockStart < 0;
+    if (start) mTravelBlockStart = iteration;
+    const bool boundary = (iteration - mTravelBlockStart) % o.coarseConvergenceWindow == 0;
+    const double reach = o.coarseNetTravel * o.delta;
+    std::size_t count = 0;
+    for (auto v : mMesh.vertices()) {
+        TravelAnchors& a = mMesh.property(anchors, v);
+        const Vec3 p = position(mMesh, v);
+        if (!start && haveDrift) {
+            const Drift& d = mMesh.property(drift, v);
+            if (d.x * d.x + d.y * d.y + d.z * d.z > movingSpeed * movingSpeed) {
+                const Vec3 before(a.before[0], a.before[1], a.before[2]);
+                // (a vertex with no position that far back is new since: a front's, counted)
+                if (!a.beforeValid || (p - before).squaredNorm() > reach * reach) ++count;
+            }
+        }
+        if (start) {
+            for (int k = 0; k < 3; ++k) a.before[k] = a.now[k] = p[k];
+            a.beforeValid = a.nowValid = true;
+        } else if (boundary) {
+            for (int k = 0; k < 3; ++k) a.before[k] = a.now[k], a.now[k] = p[k];
+            a.beforeValid = a.nowValid;
+            a.nowValid = true;
+        }
+    }
+    return count;
 }
 
 bool Evolution::settled(const EvolutionOptions& o, int w) const

@@ -72,6 +72,14 @@ struct EvolutionOptions {
     /// has travelled (see movingFraction) for this many iterations: a coarse level only has to bring
     /// the surface near, its result is refined anyway; or after coarseMaxIterations.
     int coarseConvergenceWindow = 8;
+    /// On a coarse level a travelling vertex (see movingFraction) counts only if it is also more
+    /// than this many delta from where it was one to two windows (coarseConvergenceWindow) ago.
+    /// A vertex can drift at speed without going anywhere: on the phantom 400^3 (noise seed 9) one
+    /// slid 2 voxels an iteration along the cube's face and was collapsed back 4.3 voxels every
+    /// other iteration, for 90 iterations, after the cavity had filled: level 2 waited for it (167
+    /// iterations instead of 70-76 on seeds 1-8; 216 in all, 2.3 times the 100^3 count); now 123.
+    /// A front going somewhere (the tube down the phantom's hole: 1.6 delta per window) still counts.
+    double coarseNetTravel = 0.5;
     int coarseMaxIterations = 300;
     /// On a coarse level, G at x is the largest (by trace) of the metric's samples at x and this many
     /// of the level's cells away along each axis (DilatedMetric); 0: the metric as it is. A coarse
@@ -239,9 +247,17 @@ private:
     void holdTopology(std::vector<CollisionPair>& collisions, std::vector<CollisionPair>& contacts) const;
     void recordTopologyChanges(int iteration);
     std::size_t mChurn = 0; ///< splits and collapses since the mesh was last renumbered
+    /// Per iteration (as mHistory): the travelling vertices that went somewhere (coarse levels,
+    /// see EvolutionOptions::coarseNetTravel and countTravellers()).
+    std::vector<std::size_t> mTravellers;
+    int mTravelBlockStart = -1; ///< iteration of the travel check's last block boundary (-1: none)
     void updateConvergence();
     EvolutionOptions levelOptions() const; ///< mOptions with the current level's scale
     bool settled(const EvolutionOptions& o, int window) const; ///< the convergence test over the last 2 windows
+    /// On a coarse level: the vertices whose drift exceeds movingSpeed and which are more than
+    /// coarseNetTravel delta from their position at the block boundary before last; moves the
+    /// anchors on at a boundary (every coarseConvergenceWindow iterations of the level).
+    std::size_t countTravellers(const EvolutionOptions& o, int iteration, double movingSpeed);
 };
 
 /// Runs an Evolution until it stops.

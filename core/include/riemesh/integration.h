@@ -30,6 +30,17 @@ struct Drift {
 };
 inline constexpr const char* kDriftProperty = "riemesh:drift";
 
+/// Per-vertex positions at the last two block boundaries of the evolution's travel check (see
+/// EvolutionOptions::coarseNetTravel): `now` at the last one, `before` at the one before. A split
+/// gives its new vertex the means of its edge's ends (a front's new vertices have come as far as
+/// their parents); a collapse keeps the survivor's own. Invalid for new vertices otherwise.
+struct TravelAnchors {
+    double now[3] = {0, 0, 0};
+    double before[3] = {0, 0, 0};
+    bool nowValid = false, beforeValid = false;
+};
+inline constexpr const char* kTravelAnchorsProperty = "riemesh:travel-anchors";
+
 /// Per-vertex contact (Hold, zero = none): the sum of unit directions from the vertex toward
 /// the vertices it must not approach this iteration. Evolution sets it for the collision pairs the
 /// topology step could not merge and for the sheets in contact that collision detection does not
