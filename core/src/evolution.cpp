@@ -314,7 +314,7 @@ IterationStats Evolution::step()
     co.vmax = vmax;
     std::vector<CollisionPair> contacts;
     auto collisions = findCollisions(mMesh, metric, co, &contacts);
-    keepSettledPairsApart(mMesh, image, o.forces, mLevel + 1 < int(mLevels.size()), collisions, contacts);
+    keepSettledPairsApart(mMesh, image, o.forces, level() > 0, collisions, contacts);
     phase(it.phases.collisions);
     TopologyStats ts;
     holdTopology(collisions, contacts);
@@ -364,7 +364,7 @@ IterationStats Evolution::step()
         // On a coarse level a small object's surface (its coarse image holds it, grown by half a block)
         // may be as small as a few coarse edges allow: a speck by that level's measure, but a surface
         // the finer levels refine. Specks are judged by the finest level's delta.
-        const bool coarse = mLevel + 1 < int(mLevels.size());
+        const bool coarse = level() > 0;
         const double fine = mOptions.delta * mLevels.back().scale;
         std::size_t inverted = 0;
         removed = removeSmallComponents(mMesh, coarse ? 4 : 6, 0.5 * fine * fine * fine, &inverted);
@@ -414,8 +414,7 @@ IterationStats Evolution::step()
         mSafeStepCache.invalidate();
     }
 
-    const bool coarseLevel = mLevel + 1 < int(mLevels.size());
-    const std::size_t travellers = coarseLevel ? countTravellers(o, iteration, io.movingSpeed) : 0;
+    const std::size_t travellers = level() > 0 ? countTravellers(o, iteration, io.movingSpeed) : 0;
     it.iteration = iteration;
     it.level = level();
     it.removedComponents = removed;
@@ -492,7 +491,7 @@ void Evolution::updateConvergence()
     // The live count (n_vertices() also counts deleted vertices not yet compacted away).
     if (total > 0 && mHistory[total - 1].vertices > o.maxVertices) { mReason = StopReason::VertexCap; return; }
     if (total - mAttemptStart >= o.maxIterations) { mReason = StopReason::IterationCap; return; }
-    const bool coarse = mLevel + 1 < int(mLevels.size());
+    const bool coarse = level() > 0;
     const int inLevel = total - mLevelStart;
     if (!coarse && total > 0 && mHistory[total - 1].vertices == 0) { mReason = StopReason::Converged; return; } // nothing left
     if (!coarse) {
@@ -595,8 +594,7 @@ std::size_t Evolution::countTravellers(const EvolutionOptions& o, int iteration,
         TravelAnchors& a = mMesh.property(anchors, v);
         const Vec3 p = position(mMesh, v);
         if (!start && haveDrift) {
-            const Drift& d = mMesh.property(drift, v);
-            if (d.x * d.x + d.y * d.y + d.z * d.z > movingSpeed * movingSpeed) {
+            if (travelling(mMesh.property(drift, v), movingSpeed)) {
                 const Vec3 before(a.before[0], a.before[1], a.before[2]);
                 // (a vertex with no position that far back is new since: a front's, counted)
                 if (!a.beforeValid || (p - before).squaredNorm() > reach * reach) ++count;

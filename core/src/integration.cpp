@@ -110,7 +110,7 @@ IntegrationStats integrate(Mesh& mesh, const std::vector<Vec3>& forces, const In
         m.x = keep * m.x + (1 - keep) * d.x();
         m.y = keep * m.y + (1 - keep) * d.y();
         m.z = keep * m.z + (1 - keep) * d.z();
-        moving[i] = m.x * m.x + m.y * m.y + m.z * m.z > options.movingSpeed * options.movingSpeed;
+        moving[i] = travelling(m, options.movingSpeed);
     });
     return sumStats(mesh, per);
 }
@@ -142,7 +142,7 @@ IntegrationStats accountForShortenedStep(Mesh& mesh, const std::vector<Vec3>& st
         const auto& u = mesh.property(velocity, v);
         vertexEnergy[i] = 0.5 * options.mass * (u[0] * u[0] + u[1] * u[1] + u[2] * u[2]);
         maxStep[i] = (now - start[i]).norm();
-        moving[i] = m.x * m.x + m.y * m.y + m.z * m.z > options.movingSpeed * options.movingSpeed;
+        moving[i] = travelling(m, options.movingSpeed);
     });
     return sumStats(mesh, per);
 }

@@ -29,6 +29,11 @@ struct Drift {
     double x = 0, y = 0, z = 0;
 };
 inline constexpr const char* kDriftProperty = "riemesh:drift";
+/// A vertex whose drift exceeds `movingSpeed` (world units per iteration) is travelling.
+inline bool travelling(const Drift& d, double movingSpeed)
+{
+    return d.x * d.x + d.y * d.y + d.z * d.z > movingSpeed * movingSpeed;
+}
 
 /// Per-vertex positions at the last two block boundaries of the evolution's travel check (see
 /// EvolutionOptions::coarseNetTravel): `now` at the last one, `before` at the one before. A split
