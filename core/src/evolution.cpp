@@ -190,7 +190,7 @@ Evolution::Evolution(Mesh& mesh, std::vector<EvolutionLevel> levels, const Metri
         if (!l.image || !(l.scale >= 1.0) || !std::isfinite(l.scale))
             throw std::invalid_argument("evolution: every level needs an image and a scale >= 1");
     if (mOptions.coarseConvergenceWindow < 1 || mOptions.coarseMaxIterations < 1 || !(mOptions.coarseNetTravel >= 0) ||
-        !std::isfinite(mOptions.coarseNetTravel))
+        !std::isfinite(mOptions.coarseNetTravel) || !(mOptions.levelSkipReach >= 0) || !std::isfinite(mOptions.levelSkipReach))
         throw std::invalid_argument("evolution: bad coarse-level limits");
     if (!(mOptions.coarseExternalLimit >= 0) || !std::isfinite(mOptions.coarseExternalLimit) ||
         !(mOptions.coarseFreeCurvatureFactor >= 0) || !std::isfinite(mOptions.coarseFreeCurvatureFactor))
@@ -525,12 +525,40 @@ void Evolution::updateConvergence()
             mReason = StopReason::VertexCap;
             return;
         }
-        ++mLevel; // the next, finer level starts from this surface
-        if (mLevelMetrics[std::size_t(mLevel - 1)] || mLevelMetrics[std::size_t(mLevel)]) VertexMetrics::forget(mMesh);
+        // The next, finer level starts from this surface; or the one after it, when the level in
+        // between would only refine a surface that is already in place (see levelSkipReach).
+        const int from = mLevel;
+        mLevel += arrived && !nextLevelNeeded(o) ? 2 : 1;
+        mSkippedLevels += mLevel - from - 1;
+        if (mLevelMetrics[std::size_t(from)] || mLevelMetrics[std::size_t(mLevel)]) VertexMetrics::forget(mMesh);
         mSafeStepCache.invalidate(); // (a new delta: new clearances)
         mLevelStart = total;
         mTravelBlockStart = -1; // (anchored again at the new level's first iteration)
     }
+}
+
+bool Evolution::nextLevelNeeded(const EvolutionOptions& o) const
+{
+    if (!(o.levelSkipReach > 0) || mLevel + 2 >= int(mLevels.size())) return true;
+    // Inward along each vertex's normal, is the finest image's object within reach? A surface
+    // that has arrived lies just outside the object, by the grown half block of its image and
+    // the blur (phantom 400^3, level 2: 4-8 voxels); a front stopped over an opening (a tube
+    // short of the bottom of a cavity) or a rim the coarse images thickened lies farther.
+    const ScalarImage& finest = *mLevels.back().image;
+    const double h = finest.voxelSize();
+    const double reach = o.levelSkipReach * mLevels[std::size_t(mLevel)].scale / mLevels.back().scale * h;
+    std::size_t far = 0, live = 0;
+    for (auto v : mMesh.vertices()) {
+        ++live;
+        const Vec3 p = position(mMesh, v), n = vertexNormal(mMesh, v);
+        bool found = false;
+        for (double t = 0; t <= reach && !found; t += 0.5 * h) {
+            const double x = finest.value(p - t * n) - o.forces.iso;
+            found = o.forces.objectBrighter ? x > 0 : x < 0;
+        }
+        far += !found;
+    }
+    return double(far) > o.movingFraction * double(live);
 }
 
 void Evolution::checkTangle()
@@ -657,6 +685,7 @@ EvolutionStats evolve(Mesh& mesh, const std::vector<EvolutionLevel>& levels, con
     stats.reason = evolution.reason();
     stats.predictedVertices = evolution.predictedVertices();
     stats.restarts = evolution.restarts();
+    stats.skippedLevels = evolution.skippedLevels();
     stats.untangledAt = evolution.untangledAt();
     stats.tangleCrossings = evolution.tangleCrossings();
     stats.tangleInverted = evolution.tangleInverted();

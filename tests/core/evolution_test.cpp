@@ -490,6 +490,47 @@ TEST_CASE("evolution: a vertex that drifts at speed without going anywhere does 
     CHECK(pushedCounted == 150); // the level waited for it until its cap
 }
 
+TEST_CASE("evolution: a schedule leaves out a level that would only refine a surface already in place")
+{
+    // Three levels on a ball (scales 4, 2, 1). When level 2 has arrived just outside the ball
+    // (its image: the ball grown by half a block, as vdb::Volume::buildLevels makes them), level 1
+    // would only refine it: the finest level takes the surface from level 2. When level 2's image
+    // holds far more than the ball (a coarse level that closed an opening the finest image has),
+    // its surface lies beyond reach of the ball and level 1 runs; and with levelSkipReach 0
+    // every level runs.
+    const Box3 box(Vec3::Constant(-30), Vec3::Constant(30));
+    auto ball = [&](double r) { return fogImage([r](const Vec3& x) { return ballSdf(x, Vec3::Zero(), r); }, box); };
+    const auto finest = ball(16.0), level1 = ball(17.0), near2 = ball(18.0), far2 = ball(30.0);
+    EuclideanMetric metric;
+    auto run = [&](const ScalarImage& image2, double reach, std::vector<int>& levels) {
+        Mesh mesh = makeInitialBox(finest, 6.0);
+        EvolutionOptions o = baseOptions(1.5);
+        o.levelSkipReach = reach;
+        o.progress = [&](const IterationStats& it) {
+            if (levels.empty() || levels.back() != it.level) levels.push_back(it.level);
+            return true;
+        };
+        const auto stats =
+            evolve(mesh, std::vector<EvolutionLevel>{{&image2, 4.0}, {&level1, 2.0}, {&finest, 1.0}}, metric, o);
+        REQUIRE_MESH_OK(mesh);
+        CHECK(toString(stats.reason) == std::string("converged"));
+        CHECK(topologyOf(mesh).genus == 0);
+        double mean = 0;
+        for (auto v : mesh.vertices()) mean += std::abs(ballSdf(position(mesh, v), Vec3::Zero(), 16.0));
+        mean /= double(mesh.n_vertices());
+        INFO("mean distance to the sphere " << mean);
+        CHECK(mean < 0.2);
+        return stats.skippedLevels;
+    };
+    std::vector<int> near, far, always;
+    CHECK(run(near2, 2.0, near) == 1);
+    CHECK(near == std::vector<int>{2, 0});
+    CHECK(run(far2, 2.0, far) == 0);
+    CHECK(far == std::vector<int>{2, 1, 0});
+    CHECK(run(near2, 0.0, always) == 0);
+    CHECK(always == std::vector<int>{2, 1, 0});
+}
+
 TEST_CASE("evolution: nonsense options are refused")
 {
     const auto image = fogImage([](const Vec3& x) { return ballSdf(x, Vec3::Zero(), 6); },
@@ -510,6 +551,9 @@ TEST_CASE("evolution: nonsense options are refused")
         CHECK_THROWS_AS(Evolution(mesh, image, metric, c), std::invalid_argument);
         c = o;
         c.coarseFreeCurvatureFactor = bad;
+        CHECK_THROWS_AS(Evolution(mesh, image, metric, c), std::invalid_argument);
+        c = o;
+        c.levelSkipReach = bad;
         CHECK_THROWS_AS(Evolution(mesh, image, metric, c), std::invalid_argument);
     }
     CHECK_NOTHROW(Evolution(mesh, image, metric, o));

@@ -390,7 +390,8 @@ std::string pipelineStatsJson(const PipelineResult& r, const PipelineRecord& rec
                        {"border_voxels_added", r.borderVoxels},
                        {"downsample", o.downsample},
                        {"levels", r.levels},
-                       {"level_restarts", r.evolution.restarts}};
+                       {"level_restarts", r.evolution.restarts},
+                       {"levels_skipped", r.evolution.skippedLevels}};
     if (o.riemannian)
         j["metric"] = {{"active_voxels", r.metric.activeVoxels},
                        {"total_voxels", r.metric.totalVoxels},

@@ -81,6 +81,16 @@ struct EvolutionOptions {
     /// A front going somewhere (the tube down the phantom's hole: 1.6 delta per window) still counts.
     double coarseNetTravel = 0.5;
     int coarseMaxIterations = 300;
+    /// A coarse level that has arrived (not capped) and is not the last coarse one hands its
+    /// surface straight to the level after the next when the next would only refine it: inward
+    /// along the normal, the finest image's object lies within this many of the level's blocks
+    /// (its scale, in voxels of the finest image) of all but movingFraction of the vertices. The
+    /// level in between then costs its settling and window (12-21 iterations at 400^3) for a
+    /// surface the finest level settles as fast from here. It stays where the surface is still far
+    /// somewhere: a rim the coarse images thickened (a thin plate: 150 of 640 vertices at 400^3),
+    /// a tube stopped over an opening (the noise-free phantom: 9 of 1,300), a gap the coarse
+    /// images closed (two spheres 2 voxels apart: 3 of 640). 0: every level runs.
+    double levelSkipReach = 2.0;
     /// On a coarse level, G at x is the largest (by trace) of the metric's samples at x and this many
     /// of the level's cells away along each axis (DilatedMetric); 0: the metric as it is. A coarse
     /// level's object is grown by about half a block and its image is blocky: its surface settles a
@@ -144,6 +154,7 @@ struct EvolutionStats {
     StopReason reason = StopReason::Running;
     std::size_t predictedVertices = 0; ///< Evolution::predictedVertices() at the end
     int restarts = 0;                  ///< Evolution::restarts()
+    int skippedLevels = 0;             ///< Evolution::skippedLevels()
     int untangledAt = 0;               ///< Evolution::untangledAt()
     std::size_t tangleCrossings = 0;   ///< Evolution::tangleCrossings()
     bool tangleInverted = false;       ///< Evolution::tangleInverted()
@@ -184,6 +195,8 @@ public:
     /// Times a coarse level gave up on an object too small for it (see step()): the schedule then
     /// started again from the initial surface without that level and the coarser ones.
     int restarts() const { return mRestarts; }
+    /// Levels the schedule left out so far (see EvolutionOptions::levelSkipReach).
+    int skippedLevels() const { return mSkippedLevels; }
     /// The iteration after which a tangled surface (see EvolutionOptions::untangle) was replaced by
     /// the initial one and the evolution started again with intersectionFree on; 0 if it was not.
     /// tangleCrossings(): the offending face pairs it had then (findSelfIntersections().count()).
@@ -251,6 +264,10 @@ private:
     /// see EvolutionOptions::coarseNetTravel and countTravellers()).
     std::vector<std::size_t> mTravellers;
     int mTravelBlockStart = -1; ///< iteration of the travel check's last block boundary (-1: none)
+    int mSkippedLevels = 0;
+    /// At the end of a coarse level: false when the level after it may be left out (see
+    /// EvolutionOptions::levelSkipReach).
+    bool nextLevelNeeded(const EvolutionOptions& o) const;
     void updateConvergence();
     EvolutionOptions levelOptions() const; ///< mOptions with the current level's scale
     bool settled(const EvolutionOptions& o, int window) const; ///< the convergence test over the last 2 windows
