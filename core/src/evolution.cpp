@@ -552,10 +552,7 @@ bool Evolution::nextLevelNeeded(const EvolutionOptions& o) const
         ++live;
         const Vec3 p = position(mMesh, v), n = vertexNormal(mMesh, v);
         bool found = false;
-        for (double t = 0; t <= reach && !found; t += 0.5 * h) {
-            const double x = finest.value(p - t * n) - o.forces.iso;
-            found = o.forces.objectBrighter ? x > 0 : x < 0;
-        }
+        for (double t = 0; t <= reach && !found; t += 0.5 * h) found = imageSide(finest, o.forces, p - t * n) > 0;
         far += !found;
     }
     return double(far) > o.movingFraction * double(live);
