@@ -6,7 +6,8 @@
 // once for every item whose current box overlaps `box`: an item is reported only in the cell of the
 // lower corner of the two boxes' intersection, so an item met in several cells is reported once.
 // Inserting an item again (its box changed) adds entries for its new box; the old ones stay,
-// skipped (each entry carries the insertion it belongs to).
+// skipped (each entry carries the insertion it belongs to), until they outnumber the buckets
+// twice: then they are dropped and the buckets sized for the rest.
 // Deterministic: the order of the reports depends only on the insertions. Private to core/src.
 #pragma once
 
@@ -99,6 +100,7 @@ public:
                     mEntries.push_back({key, item, head, insertion});
                     head = std::int32_t(mEntries.size() - 1);
                 }
+        if (mEntries.size() > 2 * mHead.size()) compact();
     }
 
     /// Forgets `item` (its entries stay, filtered out).
@@ -111,6 +113,8 @@ public:
 
     /// The current box of `item`.
     const Box6& box(int item) const { return mBox[std::size_t(item)]; }
+    /// Entries held, stale ones included (bounded: see compact()).
+    std::size_t entryCount() const { return mEntries.size(); }
 
     /// Calls f(item) for every item whose box overlaps `q` (see the file comment).
     template <class F>
@@ -143,6 +147,29 @@ public:
     }
 
 private:
+    /// Drops the stale entries (of items inserted again since, or erased) and sizes the buckets
+    /// for the rest, once the entries outnumber the buckets twice: a grid whose items keep moving
+    /// (the collision-safe step's overlay enters a few hundred items again every step, for as
+    /// long as the mesh is not anchored anew) would otherwise grow without bound, and so would the
+    /// chains every query walks. The entries of a cell keep their order: queries report the same.
+    void compact()
+    {
+        std::size_t kept = 0;
+        for (const Entry& e : mEntries) {
+            const std::size_t item = std::size_t(e.item);
+            if (e.insertion == mInsertion[item] && !mIsLarge[item] && mBox[item][0] <= mBox[item][3])
+                mEntries[kept++] = e;
+        }
+        mEntries.resize(kept);
+        mBits = bucketBits(kept);
+        mHead.assign(std::size_t(1) << mBits, -1);
+        for (std::size_t i = 0; i < kept; ++i) {
+            std::int32_t& head = mHead[bucket(mEntries[i].key)];
+            mEntries[i].next = head;
+            head = std::int32_t(i);
+        }
+    }
+
     struct Entry {
         std::uint64_t key;
         std::int32_t item;
