@@ -60,6 +60,18 @@ struct SafeStepOptions {
     double clearance = 0.3;
     double farMotion = 0.05;
     double rebuildFraction = 0.25;
+    /// With a SafeStepCache: a vertex is anchored ahead of where it is, along its motion in the
+    /// step that anchors it, as far as anchorAhead such motions and at most anchorAheadFraction of
+    /// the largest allowed drift ((C - minSeparation) / 2): a vertex that keeps creeping the same
+    /// way stays within its allowed drift longer (an anchor is the reference of a bound, not a
+    /// position the mesh takes). A vertex whose anchor ahead turns out closer to another sheet
+    /// than its allowed drift is anchored again where it is. Measured (issue 17), faces and
+    /// edges searched afresh over the run: phantom 100^3 32,174 without -> 27,766, head MRI
+    /// 46,985 -> 37,463; fractions 0.3 / 0.7 / 0.9: +3-5% / +1-5% / +9-27% searched; horizons
+    /// 8 and 16 within 1.5%. Two spheres pressed together (ccd_test): anchored again 23 times in
+    /// 80 steps (27 without).
+    double anchorAhead = 4;
+    double anchorAheadFraction = 0.5;
 };
 
 struct SafeStepStats {
