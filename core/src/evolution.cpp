@@ -303,7 +303,7 @@ IterationStats Evolution::step()
         ro.delta = c * o.delta;
         ro.zeta = o.zeta / c;
     }
-    RegularityStats rs = enforceRegularity(mMesh, metric, ro);
+    RegularityStats rs = enforceRegularity(mMesh, metric, ro, &mRegularityCache);
     keepObjectNecks(mMesh, image, o.forces, rs.tunnels);
     vertexMetrics.update(); // the vertices the edits made or moved: for the collision search, and the next step
     phase(it.phases.regularity);
@@ -408,10 +408,12 @@ IterationStats Evolution::step()
     if (o.renumber && live >= kRenumberMinVertices && mChurn > live / 8) {
         reorderForLocality(mMesh);
         mSafeStepCache.invalidate();
+    mRegularityCache.invalidate();
         mChurn = 0;
     } else if (ts.merges || ts.cuts || removed || mMesh.n_vertices() - live > mMesh.n_vertices() / 20) {
         mMesh.garbage_collection();
         mSafeStepCache.invalidate();
+    mRegularityCache.invalidate();
     }
 
     const std::size_t travellers = level() > 0 ? countTravellers(o, iteration, io.movingSpeed) : 0;
@@ -532,6 +534,7 @@ void Evolution::updateConvergence()
         mSkippedLevels += mLevel - from - 1;
         if (mLevelMetrics[std::size_t(from)] || mLevelMetrics[std::size_t(mLevel)]) VertexMetrics::forget(mMesh);
         mSafeStepCache.invalidate(); // (a new delta: new clearances)
+        mRegularityCache.invalidate();
         mLevelStart = total;
         mTravelBlockStart = -1; // (anchored again at the new level's first iteration)
     }
@@ -594,6 +597,7 @@ void Evolution::restartFrom(const Mesh& initial, int total)
     mMesh = initial;
     VertexMetrics::forget(mMesh); // (sampled in another level's metric, if any)
     mSafeStepCache.invalidate();
+    mRegularityCache.invalidate();
     mLevel = 0;
     mLevelStart = total;
     mTravelBlockStart = -1;

@@ -82,11 +82,13 @@ bool shorterFirst(const QueuedEdge& x, const QueuedEdge& y) { return x.priority 
 
 class Regularizer {
 public:
-    Regularizer(Mesh& mesh, const MetricField& metric, const RegularityOptions& options, RegularityStats& stats)
+    Regularizer(Mesh& mesh, const MetricField& metric, const RegularityOptions& options, RegularityStats& stats,
+                detail::GuardGrid* kept)
         : mMesh(mesh), mMetric(metric), mVertexMetrics(mesh, metric), mStats(stats), mLo(options.delta),
           mHi(options.zeta * options.delta)
     {
-        if (options.intersectionFree) mGuard = std::make_unique<detail::IntersectionGuard>(mesh, options.minSeparation);
+        if (options.intersectionFree)
+            mGuard = std::make_unique<detail::IntersectionGuard>(mesh, options.minSeparation, kept);
         mSpeculate = options.speculate;
     }
 
@@ -752,12 +754,23 @@ private:
 
 } // namespace
 
-RegularityStats enforceRegularity(Mesh& mesh, const MetricField& metric, const RegularityOptions& options)
+struct RegularityCache::Impl {
+    detail::GuardGrid guard;
+};
+
+RegularityCache::RegularityCache() : mImpl(std::make_unique<Impl>()) {}
+RegularityCache::~RegularityCache() = default;
+RegularityCache::RegularityCache(RegularityCache&&) noexcept = default;
+RegularityCache& RegularityCache::operator=(RegularityCache&&) noexcept = default;
+void RegularityCache::invalidate() { mImpl->guard.valid = false; }
+
+RegularityStats enforceRegularity(Mesh& mesh, const MetricField& metric, const RegularityOptions& options,
+                                  RegularityCache* cache)
 {
     if (!(options.delta > 0.0)) throw std::invalid_argument("enforceRegularity: delta must be > 0");
     if (!(options.zeta > 1.0)) throw std::invalid_argument("enforceRegularity: zeta must be > 1");
     RegularityStats stats;
-    Regularizer regularizer(mesh, metric, options, stats);
+    Regularizer regularizer(mesh, metric, options, stats, cache ? &cache->impl().guard : nullptr);
     for (int pass = 0; pass < options.maxPasses; ++pass) {
         if (pass == 0) regularizer.measure();
         else regularizer.measureTouched();

@@ -422,3 +422,78 @@ TEST_CASE("regularity: collapses decided in parallel first make the same mesh as
     CHECK(collapses > 100);
     CHECK(refused > 30); // (refusals to decide: the verdicts that must stay valid across collapses)
 }
+
+TEST_CASE("regularity: the edit guard's grid kept from call to call makes the same mesh as one built at each call")
+{
+    // A sphere inside another 0.02 larger, coarsened, turned and jittered call after call, guarded: with
+    // a RegularityCache (faces entered again only once they leave their grown boxes, the grid
+    // compacted as entries pile up, forgotten at each garbage collection as Evolution does) and
+    // without, the same vertices and faces at every call. Without the guard the mesh differs: a
+    // collapse on the outer sphere cuts a chord toward the inner one, which the guard refuses.
+    const EuclideanMetric metric;
+    Mesh a;
+    { // the inner sphere, faces turned inward (a cavity), then the outer one
+        const Mesh inner = makeIcosphere(Vec3(0, 0, 0), 1.0, 4);
+        std::vector<VertexHandle> made;
+        for (auto v : inner.vertices()) made.push_back(a.add_vertex(inner.point(v)));
+        for (auto f : inner.faces()) {
+            std::vector<VertexHandle> corners;
+            for (auto v = inner.cfv_begin(f); v.is_valid(); ++v) corners.push_back(made[std::size_t(v->idx())]);
+            a.add_face(corners[2], corners[1], corners[0]);
+        }
+    }
+    appendMesh(a, makeIcosphere(Vec3(0, 0, 0), 1.02, 4));
+    Mesh b = a, c = a;
+    std::mt19937 rng(2027);
+    std::normal_distribution<double> noise(0.0, 0.001);
+    RegularityOptions guarded;
+    guarded.delta = 0.05;
+    guarded.maxPasses = 2;
+    guarded.intersectionFree = true;
+    guarded.minSeparation = 1e-4;
+    RegularityOptions plain = guarded;
+    plain.intersectionFree = false;
+    RegularityCache cache;
+    bool guardMattered = false;
+    for (int it = 0; it < 40; ++it) {
+        guarded.delta = plain.delta = 0.05 + 0.004 * it; // (coarsening: collapses, some across the gap)
+        // Turned about z (faces move out of the boxes they were entered with) and jittered about
+        // their spheres (which never meet).
+        const double turn = 0.4, cs = std::cos(turn), sn = std::sin(turn);
+        for (auto v : a.vertices()) {
+            const Vec3 p = position(a, v);
+            const double radius = p.norm() < 1.01 ? 1.0 : 1.02;
+            const Vec3 r(cs * p.x() - sn * p.y(), sn * p.x() + cs * p.y(), p.z());
+            const Vec3 q = r.normalized() * radius + Vec3(noise(rng), noise(rng), noise(rng));
+            a.set_point(v, toPoint(q));
+            b.set_point(v, toPoint(q));
+            if (!c.status(v).deleted() && std::size_t(v.idx()) < c.n_vertices()) c.set_point(v, toPoint(q));
+        }
+        const auto sa = enforceRegularity(a, metric, guarded, &cache);
+        const auto sb = enforceRegularity(b, metric, guarded);
+        const auto sc = enforceRegularity(c, metric, plain);
+        CAPTURE(it);
+        REQUIRE_MESH_OK(a);
+        CHECK(sa.collapses == sb.collapses);
+        CHECK(sa.flips == sb.flips);
+        CHECK(sa.tooShort == sb.tooShort);
+        REQUIRE(a.n_vertices() == b.n_vertices());
+        REQUIRE(a.n_faces() == b.n_faces());
+        bool same = true;
+        for (auto v : a.vertices()) same = same && a.point(v) == b.point(v) && a.status(v).deleted() == b.status(v).deleted();
+        for (auto f : a.faces()) {
+            auto fa = a.cfv_begin(f);
+            auto fb = b.cfv_begin(f);
+            for (int k = 0; k < 3; ++k, ++fa, ++fb) same = same && *fa == *fb;
+        }
+        CHECK(same);
+        guardMattered = guardMattered || sa.collapses != sc.collapses || sa.flips != sc.flips || a.n_faces() != c.n_faces();
+        if (it % 8 == 7) {
+            a.garbage_collection();
+            b.garbage_collection();
+            cache.invalidate();
+        }
+        c = a; // (the unguarded copy starts each call from the guarded mesh)
+    }
+    CHECK(guardMattered);
+}

@@ -10,6 +10,7 @@
 #include "riemesh/image.h"
 #include "riemesh/integration.h"
 #include "riemesh/metric.h"
+#include "riemesh/regularity.h"
 #include "riemesh/topology.h"
 
 #include <cstddef>
@@ -243,6 +244,7 @@ private:
     std::vector<Vec3> mStepStart; ///< positions before integration (intersectionFree)
     std::vector<Vec3> mStepEnd;   ///< where integration meant them to go (intersectionFree)
     SafeStepCache mSafeStepCache; ///< the collision-safe step's clearances (intersectionFree)
+    RegularityCache mRegularityCache; ///< the edit guard's grid of the faces (intersectionFree)
     StopReason mReason = StopReason::Running;
     int mLastTopologyEvent = 0;
     int mLastCut = 0;   ///< iteration of the last tunnel cut (0: none)

@@ -4,6 +4,7 @@
 #include "riemesh/metric.h"
 #include "riemesh/topology.h"
 
+#include <memory>
 #include <vector>
 
 namespace riemesh {
@@ -35,10 +36,31 @@ struct RegularityStats {
     std::vector<TunnelCandidate> tunnels;
 };
 
+/// What enforceRegularity keeps from one call to the next with intersectionFree: the grid of the
+/// faces its intersection guard looks up, each face entered with its box grown by a tenth of the
+/// mean face size and entered again only once it has left that box, instead of a grid of every
+/// face built anew at each call. The same edits either way. Call invalidate() when the mesh is
+/// renumbered (garbage collection) or replaced (a mesh with fewer faces than before is noticed).
+class RegularityCache {
+public:
+    RegularityCache();
+    ~RegularityCache();
+    RegularityCache(RegularityCache&&) noexcept;
+    RegularityCache& operator=(RegularityCache&&) noexcept;
+    void invalidate();
+
+    struct Impl;
+    Impl& impl() { return *mImpl; } ///< (regularity.cpp's)
+
+private:
+    std::unique_ptr<Impl> mImpl;
+};
+
 /// Edge lengths are metric lengths with G at the edge midpoint approximated by the mean of the
 /// endpoint tensors (G is sampled once per vertex per call).
 /// Splits long edges, collapses short ones and flips for valence/angle quality, until every edge
 /// is within [delta, zeta*delta] (metric length) or maxPasses is reached.
-RegularityStats enforceRegularity(Mesh& mesh, const MetricField& metric, const RegularityOptions& options = {});
+RegularityStats enforceRegularity(Mesh& mesh, const MetricField& metric, const RegularityOptions& options = {},
+                                  RegularityCache* cache = nullptr);
 
 } // namespace riemesh

@@ -212,7 +212,8 @@ private:
 /// cell of its centre, so a query visits the cells of its box grown by half a cell; wider boxes are
 /// kept apart and tested by every query. query(box, f) calls f(item) once for every item whose
 /// current box overlaps `box`. Entering an item again (its box changed) replaces its box; an entry
-/// left in a cell its centre has left is skipped. Deterministic. Buffers are kept between resets.
+/// left in a cell its centre has left is skipped (each entry carries its item's entry count), and
+/// dropped once they pile up. Deterministic. Buffers are kept between resets.
 class CentreGrid {
 public:
     /// Empties the grid: cells of side cellSize (> 0, world units), buckets for about `items`.
@@ -254,10 +255,15 @@ public:
         if (it.entered && it.key == key) return; // already in that cell
         it.key = key;
         it.entered = true;
+        ++it.entry; // (its earlier entries are stale, in whichever cell: one entry per item counts)
         std::int32_t& head = mHead[bucket(key)];
-        mEntries.push_back({key, item, head});
+        mEntries.push_back({key, item, head, it.entry});
         head = std::int32_t(mEntries.size() - 1);
+        if (mEntries.size() > 2 * mHead.size()) compact();
     }
+
+    /// Entries held, stale ones included (bounded: see compact()).
+    std::size_t entryCount() const { return mEntries.size(); }
 
     /// Calls f(item) for every item whose box overlaps `q`.
     template <class F>
@@ -287,7 +293,7 @@ public:
                         const Entry& entry = mEntries[std::size_t(e)];
                         if (entry.key != key) continue;
                         const Item& it = mItems[std::size_t(entry.item)];
-                        if (it.entered && it.key == key && boxesOverlap(q, it.box)) f(entry.item);
+                        if (it.entered && it.entry == entry.entry && boxesOverlap(q, it.box)) f(entry.item);
                     }
                 }
     }
@@ -297,11 +303,13 @@ private:
         std::uint64_t key;
         std::int32_t item;
         std::int32_t next;
+        std::int32_t entry; ///< the item's entry count when it was made (stale unless its latest)
     };
     struct Item {
         Box6 box{};
         std::uint64_t key = 0;
         bool entered = false; ///< has an entry in the cell `key`
+        std::int32_t entry = 0; ///< how many entries it was given (the latest is the one that counts)
         bool wide = false;    ///< wider than 0.9 cell: tested by every query
         bool listed = false;  ///< in mWide
     };
@@ -309,6 +317,27 @@ private:
     static constexpr std::int64_t kMaxSpan = 64;
 
     std::size_t bucket(std::uint64_t key) const { return hashCell(key, mBits); }
+
+    /// Keeps each entered item's latest entry, drops the stale ones (an entry each time an item
+    /// moved to another cell) and sizes the buckets for the rest, once the entries outnumber the
+    /// buckets twice (a grid kept from call to call, its items entered again as they move). The
+    /// entries kept keep their order.
+    void compact()
+    {
+        std::size_t kept = 0;
+        for (const Entry& e : mEntries) {
+            const Item& it = mItems[std::size_t(e.item)];
+            if (it.entered && it.entry == e.entry) mEntries[kept++] = e;
+        }
+        mEntries.resize(kept);
+        mBits = bucketBits(mEntries.size());
+        mHead.assign(std::size_t(1) << mBits, -1);
+        for (std::size_t i = 0; i < mEntries.size(); ++i) {
+            std::int32_t& head = mHead[bucket(mEntries[i].key)];
+            mEntries[i].next = head;
+            head = std::int32_t(i);
+        }
+    }
 
     double mCell = 1.0, mInvCell = 1.0;
     int mBits = 8;

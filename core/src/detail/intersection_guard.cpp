@@ -10,6 +10,12 @@
 
 namespace riemesh::detail {
 
+namespace {
+/// GuardGrid's margin, in mean face extents. Phantom 100^3 and head MRI, guarded: the faces
+/// entered again per regularity step (see RegularityCache in riemesh/regularity.h).
+constexpr double kGuardMargin = 0.1;
+} // namespace
+
 Box6 IntersectionGuard::faceBox(FaceHandle f) const
 {
     const HalfedgeHandle h = mMesh.halfedge_handle(f);
@@ -24,9 +30,35 @@ Box6 IntersectionGuard::faceBox(FaceHandle f) const
     return box;
 }
 
+void IntersectionGuard::enter(FaceHandle f)
+{
+    GuardGrid& g = *mKept;
+    const std::size_t i = std::size_t(f.idx());
+    const Box6 box = faceBox(f);
+    if (i >= g.loose.size()) g.loose.resize(i + 1, Box6{1, 1, 1, -1, -1, -1}); // (contains nothing)
+    Box6& loose = g.loose[i];
+    if (loose[0] <= box[0] && loose[1] <= box[1] && loose[2] <= box[2] && box[3] <= loose[3] && box[4] <= loose[4] &&
+        box[5] <= loose[5])
+        return;
+    for (int k = 0; k < 3; ++k) loose[k] = box[k] - g.margin, loose[k + 3] = box[k + 3] + g.margin;
+    g.grid.insert(f.idx(), loose);
+}
+
 void IntersectionGuard::build()
 {
     mBuilt = true;
+    GuardGrid& g = *mKept;
+    // Kept from an earlier step: the faces that left their boxes are entered again (one pass over
+    // the faces, a box each, where a build enters every face). Built anew when the mesh has grown
+    // or shrunk twofold since (the cells were sized for its faces then).
+    std::size_t live = 0;
+    if (g.valid && mMesh.n_faces() >= g.loose.size()) { // (fewer faces: renumbered, see RegularityCache)
+        for (auto f : mMesh.faces()) (void)f, ++live;
+        if (2 * live >= g.faces && live <= 2 * g.faces) {
+            for (auto f : mMesh.faces()) enter(f);
+            return;
+        }
+    }
     // The boxes in parallel, their extents summed in face order.
     mBoxes.assign(mMesh.n_faces(), Box6{});
     forLive<FaceHandle>(mMesh, mMesh.n_faces(), 2048, [&](std::size_t i) { mBoxes[i] = faceBox(FaceHandle(int(i))); });
@@ -41,14 +73,26 @@ void IntersectionGuard::build()
     // every query), and a query visits about 3 cells per axis. Head MRI, guarded, 1 thread: the
     // edit guard's instructions 1.11 G with a BoxGrid (each face in every cell its box meets,
     // cells of the mean extent) -> 0.61 G (cells of 1.5 / 3 mean extents: 0.75 / 0.66 G).
-    mGrid.reset(count ? std::max(2.0 * extent / double(count), 1e-9) : 1.0, mMesh.n_faces());
-    for (auto f : mMesh.faces()) mGrid.insert(f.idx(), mBoxes[std::size_t(f.idx())]);
+    // Faces entered with their boxes grown by a tenth of the mean extent (see GuardGrid): most
+    // faces of a surface at rest stay in them for many steps.
+    const double mean = count ? extent / double(count) : 0.5;
+    g.grid.reset(count ? std::max(2.0 * mean, 1e-9) : 1.0, mMesh.n_faces());
+    g.margin = kGuardMargin * mean;
+    g.faces = count;
+    g.valid = true;
+    g.loose.assign(mMesh.n_faces(), Box6{1, 1, 1, -1, -1, -1});
+    for (auto f : mMesh.faces()) {
+        Box6& loose = g.loose[std::size_t(f.idx())];
+        const Box6& b = mBoxes[std::size_t(f.idx())];
+        for (int k = 0; k < 3; ++k) loose[k] = b[k] - g.margin, loose[k + 3] = b[k + 3] + g.margin;
+        g.grid.insert(f.idx(), loose);
+    }
 }
 
 void IntersectionGuard::update(VertexHandle v)
 {
-    if (!mBuilt) return; // built from the current mesh when first needed
-    for (auto f = mMesh.cvf_begin(v); f.is_valid(); ++f) mGrid.insert(f->idx(), faceBox(*f));
+    if (!mBuilt) return; // built (or brought up to date) from the current mesh when first needed
+    for (auto f = mMesh.cvf_begin(v); f.is_valid(); ++f) enter(*f);
 }
 
 bool IntersectionGuard::crosses(const std::vector<Triangle>& made, const std::array<int, 2>& gone,
@@ -97,9 +141,9 @@ bool IntersectionGuard::crosses(const std::vector<Triangle>& made, const std::ar
         }
     }
     mNear.clear();
-    mGrid.query(all, [&](int fi) { mNear.push_back(fi); });
+    mKept->grid.query(all, [&](int fi) { mNear.push_back(fi); });
     for (const int fi : mNear) {
-        if (fi == goneFaces[0] || fi == goneFaces[1]) continue;
+        if (fi == goneFaces[0] || fi == goneFaces[1] || std::size_t(fi) >= mMesh.n_faces()) continue;
         const FaceHandle f(fi);
         if (mMesh.status(f).deleted()) continue;
         const HalfedgeHandle h = mMesh.halfedge_handle(f);

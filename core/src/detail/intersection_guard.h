@@ -16,11 +16,27 @@
 
 namespace riemesh::detail {
 
+/// The guard's grid kept from one regularity step to the next (RegularityCache): each face is
+/// entered with its box grown by a margin, and entered again only once it has left that box, so
+/// that a step re-enters the faces that moved instead of all of them.
+struct GuardGrid {
+    CentreGrid grid;
+    std::vector<Box6> loose; ///< by face index: the box the face was entered with
+    double margin = 0;       ///< world units
+    std::size_t faces = 0;   ///< live faces when the grid was built
+    bool valid = false;
+};
+
 class IntersectionGuard {
 public:
     /// minSeparation > 0: an edit is refused too when its new faces come closer than that (world
-    /// units) to a face they share no vertex with (trianglesCloserThan, riemesh/ccd.h).
-    explicit IntersectionGuard(const Mesh& mesh, double minSeparation = 0) : mMesh(mesh), mMinSeparation(minSeparation) {}
+    /// units) to a face they share no vertex with (trianglesCloserThan, riemesh/ccd.h). With
+    /// `kept`, the grid of the faces is kept there for the next guard (see GuardGrid), else built
+    /// for this one.
+    explicit IntersectionGuard(const Mesh& mesh, double minSeparation = 0, GuardGrid* kept = nullptr)
+        : mMesh(mesh), mMinSeparation(minSeparation), mKept(kept ? kept : &mOwn)
+    {
+    }
 
     /// Collapsing h (its from-vertex into its to-vertex, moved to `target`, world units) leaves
     /// no two faces crossing (given none crossed before).
@@ -37,6 +53,8 @@ private:
         std::array<Vec3, 3> p;
     };
     void build();
+    /// Enters face f again if it has left the box it was entered with (or was never entered).
+    void enter(FaceHandle f);
     /// One of `made` (the edit's new triangles) meets another or a live face of the mesh that
     /// has none of the `gone` vertices and is not one of the `goneFaces`.
     bool crosses(const std::vector<Triangle>& made, const std::array<int, 2>& gone, const std::array<int, 2>& goneFaces);
@@ -44,7 +62,8 @@ private:
 
     const Mesh& mMesh;
     double mMinSeparation = 0;
-    CentreGrid mGrid;
+    GuardGrid mOwn;
+    GuardGrid* mKept;
     bool mBuilt = false;
     std::vector<Box6> mBoxes; // scratch
     std::vector<Triangle> mMade; // scratch
