@@ -406,7 +406,7 @@ struct SafeStepCache::Impl {
     /// of 80 steps without this, 23 with it, 27 with no anchor ahead.
     void withdrawAhead(Mesh& mesh, const std::vector<int>& vertices, const std::vector<Vec3>& base);
     std::vector<Vec3> settleAt, baseAt; ///< (scratch)
-    std::vector<int> liveIds;           ///< (scratch)
+    std::vector<int> settledNow;        ///< (scratch)
     /// Where a vertex at `at` that has moved by `motion` in this step is anchored (see
     /// SafeStepOptions::anchorAhead): further along that motion, by at most `most` (world units).
     static Vec3 anchorAheadOf(const Vec3& at, const Vec3& motion, double most, const SafeStepOptions& options)
@@ -533,7 +533,6 @@ void SafeStepCache::Impl::anchorHere(Mesh& mesh, const StepGeometry& g, const Sa
         ahead[i] = anchorAheadOf(g.start[i], g.end[i] - g.start[i], most, options);
     });
     rebuild(mesh, ahead, g.eta, cell, options.clearance);
-
     chi0 = int(vertexOf.size()) - int(edgeOf.size()) + int(faceOf.size()); // (the grids hold the live elements)
     // The edits so far are in faceAt0 and edgeAt0: mark the next ones.
     OpenMesh::VPropHandleT<char> edited;
@@ -636,13 +635,13 @@ void SafeStepCache::Impl::settle(Mesh& mesh, const StepGeometry& g, double motio
 {
     // The vertices searched this step (out of their clearance, or edited) that have come to rest
     // are anchored again where they end (or ahead, see below), with their faces and edges as they
-    // are now: they are
-    // clean from the next step on instead of until the next rebuild. Every pair of a registered
-    // vertex and face, or of two registered edges, sharing no vertex, keeps a distance at their
-    // anchors of at least eta + the largest allowed drift of each one's corners (which is what
-    // makes a pair of clean elements safe, see rebuild). The pairs with an element that changes
-    // here are measured again, and every corner of a pair closer than C has its allowed drift
-    // lowered to half the distance less eta (the rest already allow no more than (C - eta) / 2).
+    // are now: they are clean from the next step on instead of until the next rebuild. Every pair
+    // of a registered vertex and face, or of two registered edges, sharing no vertex, keeps a
+    // distance at their anchors of at least eta + the largest allowed drift of each one's corners
+    // (which is what makes a pair of clean elements safe, see rebuild). The pairs with an element
+    // that changes here are measured again, and every corner of a pair closer than C has its
+    // allowed drift lowered to half the distance less eta (the rest already allow no more than
+    // (C - eta) / 2).
     grow(mesh);
     settleV.clear();
     for (const int i : seeds) {
@@ -666,9 +665,9 @@ void SafeStepCache::Impl::settle(Mesh& mesh, const StepGeometry& g, double motio
         settleAt.push_back(whole ? anchorAheadOf(at, at - g.start[std::size_t(i)], options.anchorAheadFraction * most, options)
                                  : at);
     }
-    liveIds = settleV;
+    settledNow = settleV;
     anchorAgain(mesh);
-    withdrawAhead(mesh, liveIds, baseAt);
+    withdrawAhead(mesh, settledNow, baseAt);
 }
 
 void SafeStepCache::Impl::grow(const Mesh& mesh)
