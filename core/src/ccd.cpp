@@ -416,6 +416,8 @@ struct SafeStepCache::Impl {
         return at + motion * std::min(options.anchorAhead, most / length);
     }
     std::vector<Vec3> ahead; ///< anchorHere's anchors (scratch)
+    /// The allowed drift of a vertex with no pair closer than C: (C - eta) / 2, a hair less.
+    double largestDrift() const { return 0.5 * (radius - eta) * (1 - 1e-9); }
     /// Clean: registered, is live, and no dirty or edited vertex is one of its corners.
     bool cleanFace(const Mesh& mesh, std::size_t f) const
     {
@@ -655,7 +657,7 @@ void SafeStepCache::Impl::settle(Mesh& mesh, const StepGeometry& g, double motio
     // Ahead along this step's motion (SafeStepOptions::anchorAhead; not a vertex whose motion was
     // cut short, held against another sheet): slowly creeping vertices, most of those anchored
     // again on the head MRI at rest, leave their drift later.
-    const double most = 0.5 * (radius - eta) * (1 - 1e-9);
+    const double most = largestDrift();
     settleAt.clear();
     baseAt.resize(std::max(baseAt.size(), mesh.n_vertices()));
     for (const int i : settleV) {
@@ -703,7 +705,7 @@ void SafeStepCache::Impl::anchorAgain(Mesh& mesh)
     OpenMesh::VPropHandleT<char> edited;
     const bool marks = mesh.get_property_handle(edited, kEditedProperty);
     const std::size_t nf = mesh.n_faces(), ne = mesh.n_edges();
-    const double most = 0.5 * (radius - eta) * (1 - 1e-9);
+    const double most = largestDrift();
     for (std::size_t k = 0; k < settleV.size(); ++k) {
         const int i = settleV[k];
         const VertexHandle v(i);

@@ -407,13 +407,11 @@ IterationStats Evolution::step()
     mChurn += std::size_t(rs.splits) + std::size_t(rs.collapses);
     if (o.renumber && live >= kRenumberMinVertices && mChurn > live / 8) {
         reorderForLocality(mMesh);
-        mSafeStepCache.invalidate();
-    mRegularityCache.invalidate();
+        forgetGuaranteeCaches();
         mChurn = 0;
     } else if (ts.merges || ts.cuts || removed || mMesh.n_vertices() - live > mMesh.n_vertices() / 20) {
         mMesh.garbage_collection();
-        mSafeStepCache.invalidate();
-    mRegularityCache.invalidate();
+        forgetGuaranteeCaches();
     }
 
     const std::size_t travellers = level() > 0 ? countTravellers(o, iteration, io.movingSpeed) : 0;
@@ -533,11 +531,16 @@ void Evolution::updateConvergence()
         mLevel += arrived && !nextLevelNeeded(o) ? 2 : 1;
         mSkippedLevels += mLevel - from - 1;
         if (mLevelMetrics[std::size_t(from)] || mLevelMetrics[std::size_t(mLevel)]) VertexMetrics::forget(mMesh);
-        mSafeStepCache.invalidate(); // (a new delta: new clearances)
-        mRegularityCache.invalidate();
+        forgetGuaranteeCaches(); // (a new delta: new clearances)
         mLevelStart = total;
         mTravelBlockStart = -1; // (anchored again at the new level's first iteration)
     }
+}
+
+void Evolution::forgetGuaranteeCaches()
+{
+    mSafeStepCache.invalidate();
+    mRegularityCache.invalidate();
 }
 
 bool Evolution::nextLevelNeeded(const EvolutionOptions& o) const
@@ -596,8 +599,7 @@ void Evolution::restartFrom(const Mesh& initial, int total)
 {
     mMesh = initial;
     VertexMetrics::forget(mMesh); // (sampled in another level's metric, if any)
-    mSafeStepCache.invalidate();
-    mRegularityCache.invalidate();
+    forgetGuaranteeCaches();
     mLevel = 0;
     mLevelStart = total;
     mTravelBlockStart = -1;

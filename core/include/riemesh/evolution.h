@@ -271,6 +271,9 @@ private:
     /// EvolutionOptions::levelSkipReach).
     bool nextLevelNeeded(const EvolutionOptions& o) const;
     void updateConvergence();
+    /// The mesh was renumbered or replaced, or the level changed: the intersection-free caches
+    /// (the safe step's clearances, the edit guard's grid) start again.
+    void forgetGuaranteeCaches();
     EvolutionOptions levelOptions() const; ///< mOptions with the current level's scale
     bool settled(const EvolutionOptions& o, int window) const; ///< the convergence test over the last 2 windows
     /// On a coarse level: the vertices whose drift exceeds movingSpeed and which are more than

@@ -56,6 +56,21 @@ inline int bucketBits(std::size_t entries)
 }
 inline std::size_t hashCell(std::uint64_t key, int bits) { return std::size_t((key * 0x9E3779B97F4A7C15ull) >> (64 - bits)); }
 
+/// The chains of a hashed grid made again for `entries` (each with a key and a next): buckets for
+/// their count (bucketBits), each entry pushed in front of its bucket's chain in order, so that a
+/// chain lists its entries newest first, as insertions left it. For the grids' compaction.
+template <class Entry>
+void relinkChains(std::vector<Entry>& entries, std::vector<std::int32_t>& head, int& bits)
+{
+    bits = bucketBits(entries.size());
+    head.assign(std::size_t(1) << bits, -1);
+    for (std::size_t i = 0; i < entries.size(); ++i) {
+        std::int32_t& h = head[hashCell(entries[i].key, bits)];
+        entries[i].next = h;
+        h = std::int32_t(i);
+    }
+}
+
 class BoxGrid {
 public:
     /// Empties the grid; cells of side cellSize (world units, > 0), buckets and room for about
@@ -161,13 +176,7 @@ private:
                 mEntries[kept++] = e;
         }
         mEntries.resize(kept);
-        mBits = bucketBits(kept);
-        mHead.assign(std::size_t(1) << mBits, -1);
-        for (std::size_t i = 0; i < kept; ++i) {
-            std::int32_t& head = mHead[bucket(mEntries[i].key)];
-            mEntries[i].next = head;
-            head = std::int32_t(i);
-        }
+        relinkChains(mEntries, mHead, mBits);
     }
 
     struct Entry {
@@ -330,13 +339,7 @@ private:
             if (it.entered && it.entry == e.entry) mEntries[kept++] = e;
         }
         mEntries.resize(kept);
-        mBits = bucketBits(mEntries.size());
-        mHead.assign(std::size_t(1) << mBits, -1);
-        for (std::size_t i = 0; i < mEntries.size(); ++i) {
-            std::int32_t& head = mHead[bucket(mEntries[i].key)];
-            mEntries[i].next = head;
-            head = std::int32_t(i);
-        }
+        relinkChains(mEntries, mHead, mBits);
     }
 
     double mCell = 1.0, mInvCell = 1.0;

@@ -14,6 +14,12 @@ namespace {
 /// GuardGrid's margin, in mean face extents. Phantom 100^3 and head MRI, guarded: the faces
 /// entered again per regularity step (see RegularityCache in riemesh/regularity.h).
 constexpr double kGuardMargin = 0.1;
+
+Box6 grownBy(Box6 box, double margin)
+{
+    for (int k = 0; k < 3; ++k) box[k] -= margin, box[k + 3] += margin;
+    return box;
+}
 } // namespace
 
 Box6 IntersectionGuard::faceBox(FaceHandle f) const
@@ -40,7 +46,7 @@ void IntersectionGuard::enter(FaceHandle f)
     if (loose[0] <= box[0] && loose[1] <= box[1] && loose[2] <= box[2] && box[3] <= loose[3] && box[4] <= loose[4] &&
         box[5] <= loose[5])
         return;
-    for (int k = 0; k < 3; ++k) loose[k] = box[k] - g.margin, loose[k + 3] = box[k + 3] + g.margin;
+    loose = grownBy(box, g.margin);
     g.grid.insert(f.idx(), loose);
 }
 
@@ -83,8 +89,7 @@ void IntersectionGuard::build()
     g.loose.assign(mMesh.n_faces(), Box6{1, 1, 1, -1, -1, -1});
     for (auto f : mMesh.faces()) {
         Box6& loose = g.loose[std::size_t(f.idx())];
-        const Box6& b = mBoxes[std::size_t(f.idx())];
-        for (int k = 0; k < 3; ++k) loose[k] = b[k] - g.margin, loose[k + 3] = b[k + 3] + g.margin;
+        loose = grownBy(mBoxes[std::size_t(f.idx())], g.margin);
         g.grid.insert(f.idx(), loose);
     }
 }
