@@ -289,47 +289,85 @@ void findInChunks(std::size_t count, std::vector<std::vector<T>>& lists, std::ve
     for (std::size_t c = 0; c < chunks; ++c) out.insert(out.end(), lists[c].begin(), lists[c].end());
 }
 
-/// Builds grids from boxes (cells of `cell`), each on a thread of its own when there are several.
-template <std::size_t N>
-void buildGrids(const std::array<std::pair<const std::vector<Box6>*, detail::PackedBoxGrid*>, N>& jobs, double cell)
+/// Builds the grids of the vertices', the faces' and the edges' boxes in one frame (cells of
+/// `cell`, see PackedBoxGrid::frameFor), to be paired: the faces' and the edges' at once, then
+/// the vertices' with as many buckets as the faces' (paired bucket by bucket).
+void buildGridsToPair(const std::vector<Box6>& vertexBoxes, detail::PackedBoxGrid& vertexGrid,
+                      const std::vector<Box6>& faceBoxes, detail::PackedBoxGrid& faceGrid,
+                      const std::vector<Box6>& edgeBoxes, detail::PackedBoxGrid& edgeGrid, double cell)
 {
-    detail::parallelFor(0, N, 1, [&](std::size_t k) { jobs[k].second->build(*jobs[k].first, cell); });
+    const auto frame = detail::PackedBoxGrid::frameFor({&vertexBoxes, &faceBoxes, &edgeBoxes}, cell);
+    detail::parallelFor(0, 2, 1, [&](std::size_t k) {
+        k ? edgeGrid.build(edgeBoxes, frame) : faceGrid.build(faceBoxes, frame);
+    });
+    vertexGrid.build(vertexBoxes, frame, faceGrid.buckets());
+}
+
+/// Buckets per chunk of pairInChunks.
+constexpr std::size_t kPairChunk = 1024;
+
+/// Runs pairs(b0, b1, found) over the buckets [0, buckets) in parallel, in fixed chunks of
+/// kPairChunk buckets, each appending to its own list; the lists are then appended to `out` in
+/// chunk order (the same for any thread count, as findInChunks).
+template <class T, class Pairs>
+void pairInChunks(std::size_t buckets, std::vector<std::vector<T>>& lists, std::vector<T>& out, Pairs&& pairs)
+{
+    const std::size_t chunks = (buckets + kPairChunk - 1) / kPairChunk;
+    if (lists.size() < chunks) lists.resize(chunks);
+    detail::parallelFor(0, chunks, 1, [&](std::size_t c) {
+        std::vector<T>& found = lists[c];
+        found.clear();
+        pairs(c * kPairChunk, std::min(buckets, (c + 1) * kPairChunk), found);
+    });
+    for (std::size_t c = 0; c < chunks; ++c) out.insert(out.end(), lists[c].begin(), lists[c].end());
 }
 
 /// The broad phase of one step from scratch: every vertex-face and edge-edge pair whose swept
 /// boxes (the face's grown by eta, the edges' by eta / 2 each) overlap and that is within reach.
+/// The pairs of boxes come from pairing the grids cell by cell (PackedBoxGrid::pairs), not from
+/// a query per vertex and per edge (each cell's entries scanned by every query meeting it).
+/// Phantom 100^3, one thread: the edge-edge pairs of its 22 steps from scratch in 9.5 ms instead
+/// of 15.9, the collision-safe steps in 415 M instructions instead of 518 M (with the same
+/// pairing at the anchorings, SafeStepCache::Impl::rebuild).
 void allCandidates(const StepGeometry& g, const std::vector<int>& live, const std::vector<std::array<int, 3>>& faces,
-                   const std::vector<std::array<int, 2>>& edges, double cell, std::vector<Box6>& faceBox,
-                   std::vector<Box6>& edgeBox, std::array<detail::PackedBoxGrid, 2>& grids,
+                   const std::vector<std::array<int, 2>>& edges, double cell, std::vector<Box6>& vertexBox,
+                   std::vector<Box6>& faceBox, std::vector<Box6>& edgeBox, std::array<detail::PackedBoxGrid, 3>& grids,
                    std::vector<std::vector<Quad>>& lists, std::vector<Quad>& candidates)
 {
+    vertexBox.resize(live.size());
+    detail::parallelFor(0, live.size(), kPassGrain, [&](std::size_t k) { vertexBox[k] = g.vertexBox(live[k]); });
     faceBox.resize(faces.size());
     detail::parallelFor(0, faces.size(), kPassGrain, [&](std::size_t f) { faceBox[f] = g.faceBox(faces[f]); });
     edgeBox.resize(edges.size());
     detail::parallelFor(0, edges.size(), kPassGrain, [&](std::size_t e) { edgeBox[e] = g.edgeBox(edges[e]); });
-    // The two grids at once, each on one thread (building one is serial).
-    detail::PackedBoxGrid& faceGrid = grids[0];
-    detail::PackedBoxGrid& edgeGrid = grids[1];
-    buildGrids<2>({{{&faceBox, &faceGrid}, {&edgeBox, &edgeGrid}}}, cell);
-    findInChunks(live.size(), lists, candidates, [&](std::size_t k, std::vector<Quad>& found) {
-        const int i = live[k];
-        const Box6 b = g.vertexBox(i);
-        faceGrid.query(b, [&](int f) {
-            const auto& t = faces[std::size_t(f)];
-            // (the grid's float boxes are a little larger: the exact boxes decide)
-            if (hasCorner(t, i) || !detail::boxesOverlap(b, faceBox[std::size_t(f)]) || !g.vertexFace(i, t)) return;
+    detail::PackedBoxGrid& vertexGrid = grids[0];
+    detail::PackedBoxGrid& faceGrid = grids[1];
+    detail::PackedBoxGrid& edgeGrid = grids[2];
+    buildGridsToPair(vertexBox, vertexGrid, faceBox, faceGrid, edgeBox, edgeGrid, cell);
+    auto vertexFace = [&](int k, int f, std::vector<Quad>& found) {
+        const int i = live[std::size_t(k)];
+        const auto& t = faces[std::size_t(f)];
+        // (the grid's float boxes are a little larger: the exact boxes decide)
+        if (!hasCorner(t, i) && detail::boxesOverlap(vertexBox[std::size_t(k)], faceBox[std::size_t(f)]) &&
+            g.vertexFace(i, t))
             found.push_back(vertexFaceQuad(i, t));
-        });
-    });
-    findInChunks(edges.size(), lists, candidates, [&](std::size_t e, std::vector<Quad>& found) {
-        const auto& x = edges[e];
-        edgeGrid.query(edgeBox[e], [&](int h) { // each pair once: from its lower edge
-            const auto& y = edges[std::size_t(h)];
-            if (shareVertex(x, y) || !detail::boxesOverlap(edgeBox[e], edgeBox[std::size_t(h)]) || !g.edgeEdge(x, y))
-                return;
+    };
+    auto edgeEdge = [&](int e, int h, std::vector<Quad>& found) { // (e < h)
+        const auto& x = edges[std::size_t(e)];
+        const auto& y = edges[std::size_t(h)];
+        if (!shareVertex(x, y) && detail::boxesOverlap(edgeBox[std::size_t(e)], edgeBox[std::size_t(h)]) && g.edgeEdge(x, y))
             found.push_back(edgeEdgeQuad(x, y));
-        }, int(e));
+    };
+    pairInChunks(std::max(vertexGrid.buckets(), faceGrid.buckets()), lists, candidates,
+                 [&](std::size_t b0, std::size_t b1, std::vector<Quad>& found) {
+                     detail::PackedBoxGrid::pairs(vertexGrid, faceGrid, b0, b1,
+                                                  [&](int k, int f) { vertexFace(k, f, found); });
+                 });
+    pairInChunks(edgeGrid.buckets(), lists, candidates, [&](std::size_t b0, std::size_t b1, std::vector<Quad>& found) {
+        edgeGrid.pairs(b0, b1, [&](int e, int h) { edgeEdge(e, h, found); });
     });
+    detail::PackedBoxGrid::pairsWithLarge(vertexGrid, faceGrid, [&](int k, int f) { vertexFace(k, f, candidates); });
+    edgeGrid.pairsWithLarge([&](int e, int h) { edgeEdge(e, h, candidates); });
 }
 
 } // namespace
@@ -592,36 +630,37 @@ void SafeStepCache::Impl::rebuild(const Mesh& mesh, const std::vector<Vec3>& anc
     };
     boxesOf(faceAt0, faceOf, anchoredBoxes[1], faceGrow);
     boxesOf(edgeAt0, edgeOf, anchoredBoxes[2], edgeGrow);
-    buildGrids<3>({{{&anchoredBoxes[0], &vertexGrid}, {&anchoredBoxes[1], &faceGrid}, {&anchoredBoxes[2], &edgeGrid}}},
-                  cell);
-    // The pairs closer than C: query boxes grown so that, with the grids' growth, they meet every
-    // primitive whose own box is within C.
+    buildGridsToPair(anchoredBoxes[0], vertexGrid, anchoredBoxes[1], faceGrid, anchoredBoxes[2], edgeGrid, cell);
+    // The pairs closer than C: those whose boxes overlap (grown by C / 2 and eta, they meet
+    // wherever the primitives are within C + eta), measured.
     const double C2 = C * C;
     near.clear();
-    findInChunks(vertexOf.size(), nearLists, near, [&](std::size_t k, std::vector<Near>& found) {
-        const int i = vertexOf[k];
-        const Vec3& p = anchor[std::size_t(i)];
-        faceGrid.query(anchoredBox(&i, 1, std::max(0.0, C - faceGrow)), [&](int item) {
-            const int f = faceOf[std::size_t(item)];
-            const auto& t = faceAt0[std::size_t(f)];
-            if (hasCorner(t, i)) return;
-            const double d2 = pointTriangleDistanceSquared(p, anchor[std::size_t(t[0])], anchor[std::size_t(t[1])],
-                                                           anchor[std::size_t(t[2])]);
-            if (d2 < C2) found.push_back({{i, t[0], t[1], t[2]}, std::sqrt(d2)});
-        });
+    auto vertexFace = [&](int item, int faceItem, std::vector<Near>& found) {
+        const int i = vertexOf[std::size_t(item)];
+        const auto& t = faceAt0[std::size_t(faceOf[std::size_t(faceItem)])];
+        if (hasCorner(t, i)) return;
+        const double d2 = pointTriangleDistanceSquared(anchor[std::size_t(i)], anchor[std::size_t(t[0])],
+                                                       anchor[std::size_t(t[1])], anchor[std::size_t(t[2])]);
+        if (d2 < C2) found.push_back({{i, t[0], t[1], t[2]}, std::sqrt(d2)});
+    };
+    auto edgeEdge = [&](int item, int other, std::vector<Near>& found) {
+        const auto& x = edgeAt0[std::size_t(edgeOf[std::size_t(item)])];
+        const auto& y = edgeAt0[std::size_t(edgeOf[std::size_t(other)])];
+        if (shareVertex(x, y)) return;
+        const double d2 = segmentSegmentDistanceSquared(anchor[std::size_t(x[0])], anchor[std::size_t(x[1])],
+                                                        anchor[std::size_t(y[0])], anchor[std::size_t(y[1])]);
+        if (d2 < C2) found.push_back({{x[0], x[1], y[0], y[1]}, std::sqrt(d2)});
+    };
+    pairInChunks(std::max(vertexGrid.buckets(), faceGrid.buckets()), nearLists, near,
+                 [&](std::size_t b0, std::size_t b1, std::vector<Near>& found) {
+                     detail::PackedBoxGrid::pairs(vertexGrid, faceGrid, b0, b1,
+                                                  [&](int k, int f) { vertexFace(k, f, found); });
+                 });
+    pairInChunks(edgeGrid.buckets(), nearLists, near, [&](std::size_t b0, std::size_t b1, std::vector<Near>& found) {
+        edgeGrid.pairs(b0, b1, [&](int e, int h) { edgeEdge(e, h, found); });
     });
-    findInChunks(edgeOf.size(), nearLists, near, [&](std::size_t k, std::vector<Near>& found) {
-        const int e = edgeOf[k];
-        const auto& x = edgeAt0[std::size_t(e)];
-        edgeGrid.query(anchoredBox(x.data(), 2, std::max(0.0, C - edgeGrow)), [&](int item) {
-            const int h = edgeOf[std::size_t(item)];
-            const auto& y = edgeAt0[std::size_t(h)];
-            if (shareVertex(x, y)) return;
-            const double d2 = segmentSegmentDistanceSquared(anchor[std::size_t(x[0])], anchor[std::size_t(x[1])],
-                                                            anchor[std::size_t(y[0])], anchor[std::size_t(y[1])]);
-            if (d2 < C2) found.push_back({{x[0], x[1], y[0], y[1]}, std::sqrt(d2)});
-        }, int(k)); // (each pair from its lower item)
-    });
+    detail::PackedBoxGrid::pairsWithLarge(vertexGrid, faceGrid, [&](int k, int f) { vertexFace(k, f, near); });
+    edgeGrid.pairsWithLarge([&](int e, int h) { edgeEdge(e, h, near); });
     clearance.assign(vertices0, C);
     for (const Near& n : near)
         for (int v : n.v) clearance[std::size_t(v)] = std::min(clearance[std::size_t(v)], n.d);
@@ -961,13 +1000,13 @@ SafeStepStats limitStepToCollisionFree(Mesh& mesh, const std::vector<Vec3>& star
         std::vector<char> moves, changed;
         std::vector<std::array<int, 3>> faces;
         std::vector<std::array<int, 2>> edges;
-        std::vector<Box6> faceBox, edgeBox;
+        std::vector<Box6> vertexBox, faceBox, edgeBox;
         std::vector<double> reach, alpha, factor, extents;
         std::vector<int> touched;
         std::vector<Quad> candidates;
         std::vector<std::vector<Quad>> lists;
         std::vector<int> live;
-        std::array<detail::PackedBoxGrid, 2> grids;
+        std::array<detail::PackedBoxGrid, 3> grids;
     };
     static thread_local Scratch scratch;
     std::vector<Vec3>& end = scratch.end;
@@ -1023,8 +1062,8 @@ SafeStepStats limitStepToCollisionFree(Mesh& mesh, const std::vector<Vec3>& star
     if (!cache || double(far) > 0.5 * options.rebuildFraction * double(live.size())) {
         if (cache) cache->invalidate();
         collectPrimitives(mesh, scratch.faces, scratch.edges);
-        allCandidates(g, live, scratch.faces, scratch.edges, cell, scratch.faceBox, scratch.edgeBox, scratch.grids,
-                      scratch.lists, candidates);
+        allCandidates(g, live, scratch.faces, scratch.edges, cell, scratch.vertexBox, scratch.faceBox, scratch.edgeBox,
+                      scratch.grids, scratch.lists, candidates);
     } else {
         cache->impl().candidates(mesh, g, options, candidates, stats);
         cached = true;

@@ -78,6 +78,70 @@ TEST_CASE("box grid: thousands of boxes, against brute force")
     checkAgainstBruteForce(boxes, queries, 1.5);
 }
 
+namespace {
+
+/// Every overlapping pair of first x second (or of first with itself, a < b) once from pairs()
+/// and pairsWithLarge(), against brute force.
+void checkPairsAgainstBruteForce(const std::vector<Box6>& first, const std::vector<Box6>* second, double cell,
+                                 std::size_t minBuckets)
+{
+    const bool same = second == nullptr;
+    const std::vector<Box6>& other = same ? first : *second;
+    const PackedBoxGrid::Frame frame = PackedBoxGrid::frameFor({&first, &other}, cell);
+    PackedBoxGrid a, b;
+    a.build(first, frame);
+    if (!same) b.build(other, frame, minBuckets);
+    std::vector<std::pair<int, int>> got;
+    auto report = [&](int x, int y) { got.push_back({x, y}); };
+    const std::size_t buckets = std::max(a.buckets(), same ? a.buckets() : b.buckets());
+    // (in two halves: callers split the buckets among threads)
+    for (std::size_t b0 : {std::size_t(0), buckets / 2}) {
+        const std::size_t b1 = b0 ? buckets : buckets / 2;
+        if (same) a.pairs(b0, b1, report);
+        else PackedBoxGrid::pairs(a, b, b0, b1, report);
+    }
+    if (same) a.pairsWithLarge(report);
+    else PackedBoxGrid::pairsWithLarge(a, b, report);
+    std::sort(got.begin(), got.end());
+    REQUIRE(std::adjacent_find(got.begin(), got.end()) == got.end()); // each pair once
+    std::vector<std::pair<int, int>> want;
+    for (std::size_t i = 0; i < first.size(); ++i)
+        for (std::size_t j = same ? i + 1 : 0; j < other.size(); ++j)
+            if (boxesOverlap(first[i], other[j])) want.push_back({int(i), int(j)});
+    CHECK(std::includes(got.begin(), got.end(), want.begin(), want.end()));
+    for (const auto& [i, j] : got) {
+        CHECK((!same || i < j));
+        Box6 grown = first[std::size_t(i)];
+        for (int k = 0; k < 6; ++k) grown[k] += (k < 3 ? -1 : 1) * 1e-6 * (1 + std::abs(grown[k]));
+        CHECK(boxesOverlap(other[std::size_t(j)], grown)); // (or touching within a float's precision)
+    }
+}
+
+} // namespace
+
+TEST_CASE("box grid: pairing two grids, and one grid with itself, against brute force")
+{
+    // The broad phase of a collision-safe step from scratch pairs the vertices' grid with the
+    // faces' and the edges' grid with itself, cell by cell: mixed sizes, boxes too large for the
+    // cells (paired apart), bucket counts that differ, NaN.
+    std::mt19937 rng(31);
+    for (double centre : {0.0, -350.0, 1.0e6}) {
+        std::vector<Box6> small, large;
+        for (int i = 0; i < 300; ++i) small.push_back(randomBox(rng, centre, 20.0, i % 60 == 0 ? 0.0 : 0.3));
+        for (int i = 0; i < 1500; ++i) large.push_back(randomBox(rng, centre, 22.0, i % 100 == 0 ? 200.0 : 1.5));
+        small[7] = {std::nan(""), 0, 0, 1, 1, 1};
+        for (double cell : {0.5, 2.0})
+            for (std::size_t minBuckets : {std::size_t(0), std::size_t(1) << 14}) {
+                CAPTURE(centre);
+                CAPTURE(cell);
+                CAPTURE(minBuckets);
+                checkPairsAgainstBruteForce(small, &large, cell, minBuckets);
+                checkPairsAgainstBruteForce(large, &small, cell, minBuckets);
+                if (minBuckets == 0) checkPairsAgainstBruteForce(large, nullptr, cell, 0);
+            }
+    }
+}
+
 TEST_CASE("box grid: a query long along z wraps around the buckets without reporting twice")
 {
     // Few boxes (the fewest buckets) in one column; queries spanning up to the 64-cell limit

@@ -15,6 +15,7 @@
 #include <cmath>
 #include <cstdint>
 #include <cstring>
+#include <initializer_list>
 #include <limits>
 #include <vector>
 
@@ -351,67 +352,178 @@ private:
 };
 
 /// A BoxGrid built once from all its boxes, laid out for speed (the collision-safe step queries
-/// it once per vertex and edge of the mesh, every iteration): cells are numbered relative to the
+/// it for the vertices and edges that moved, every iteration): cells are numbered relative to the
 /// lowest one, and a cell's bucket is its column's hash plus its z, so that the cells of a query
 /// along z are consecutive buckets and their entries one run of memory, scanned without branches
 /// (an entry carries its key and its item's box, in floats rounded outward). Reports every item
 /// whose box overlaps the query, once (the float boxes are a little larger than the given ones: a
-/// few more reports, never fewer). Buffers are kept between builds.
+/// few more reports, never fewer). Two grids built in one frame are also paired cell by cell
+/// (pairs(): every two overlapping items, without a query per item). Buffers are kept between
+/// builds.
 class PackedBoxGrid {
 public:
-    /// Items 0..boxes.size()-1 with those boxes; cells of side cellSize > 0 (world units; larger
-    /// when the boxes span more than 2^20 such cells on an axis).
-    void build(const std::vector<Box6>& boxes, double cellSize)
+    /// Where a grid's cells are: their side's inverse and the origin (in cells). Grids built in
+    /// the same frame can be paired (pairs()).
+    struct Frame {
+        double invCell = 1.0;
+        std::array<double, 3> origin = {0, 0, 0};
+    };
+    /// The frame of cells of side cellSize > 0 (world units; larger when the boxes span more than
+    /// 2^20 such cells on an axis) for the boxes of all `sets`.
+    static Frame frameFor(std::initializer_list<const std::vector<Box6>*> sets, double cellSize)
     {
-        mLarge.clear();
-        mTemp.clear();
-        mEntries.clear();
         // The boxes' extent, in the given cells: the origin, and a cell no smaller than 2^-20 of it.
         std::array<double, 6> all = {kHuge, kHuge, kHuge, -kHuge, -kHuge, -kHuge};
-        for (const Box6& b : boxes)
-            for (int k = 0; k < 3; ++k)
-                if (std::abs(b[k]) < kHuge && std::abs(b[k + 3]) < kHuge) {
-                    all[k] = std::min(all[k], b[k]);
-                    all[k + 3] = std::max(all[k + 3], b[k + 3]);
-                }
+        for (const std::vector<Box6>* boxes : sets)
+            for (const Box6& b : *boxes)
+                for (int k = 0; k < 3; ++k)
+                    if (std::abs(b[k]) < kHuge && std::abs(b[k + 3]) < kHuge) {
+                        all[k] = std::min(all[k], b[k]);
+                        all[k + 3] = std::max(all[k + 3], b[k + 3]);
+                    }
         double cell = cellSize;
         for (int k = 0; k < 3; ++k)
             if (all[k] <= all[k + 3]) cell = std::max(cell, (all[k + 3] - all[k]) / double(1 << 20));
-        mInvCell = 1.0 / cell;
-        for (int k = 0; k < 3; ++k) mOrigin[k] = all[k] <= all[k + 3] ? std::floor(all[k] * mInvCell) : 0.0;
+        Frame frame;
+        frame.invCell = 1.0 / cell;
+        for (int k = 0; k < 3; ++k) frame.origin[k] = all[k] <= all[k + 3] ? std::floor(all[k] * frame.invCell) : 0.0;
+        return frame;
+    }
+
+    /// Items 0..boxes.size()-1 with those boxes; cells of side cellSize > 0 (see frameFor).
+    void build(const std::vector<Box6>& boxes, double cellSize) { build(boxes, frameFor({&boxes}, cellSize)); }
+
+    /// The same in a given frame (the boxes within it: see frameFor), with at least minBuckets
+    /// buckets (a power of two; pairs() walks the buckets of two grids together).
+    void build(const std::vector<Box6>& boxes, const Frame& frame, std::size_t minBuckets = 0)
+    {
+        mLarge.clear();
+        mEntries.clear();
+        mInvCell = frame.invCell;
+        mOrigin = frame.origin;
+        // Two passes over the items' cells (a count per bucket, then each entry written in its
+        // place) rather than the entries made in order and then sorted: one copy of them less.
+        mItems.resize(boxes.size());
+        std::size_t entries = 0;
         for (std::size_t i = 0; i < boxes.size(); ++i) {
-            Entry e{0, std::int32_t(i), {}, 0};
+            Item& it = mItems[i];
             for (int k = 0; k < 3; ++k) {
-                e.box[k] = down(boxes[i][k]);
-                e.box[k + 3] = up(boxes[i][k + 3]);
+                it.box[k] = down(boxes[i][k]);
+                it.box[k + 3] = up(boxes[i][k + 3]);
             }
             std::array<std::int64_t, 6> c{};
-            if (!cellRange(e.box, c)) {
-                mLarge.push_back(e);
+            it.inCells = cellRange(it.box, c);
+            if (!it.inCells) {
+                mLarge.push_back(Entry{0, std::int32_t(i), it.box, 0});
                 continue;
             }
-            for (std::int64_t x = c[0]; x <= c[3]; ++x)
-                for (std::int64_t y = c[1]; y <= c[4]; ++y)
-                    for (std::int64_t z = c[2]; z <= c[5]; ++z) {
-                        e.key = packCell(x, y, z); // (cells relative to the origin: 0 <= x, y, z < 2^21; queries clamped)
-                        e.lowest = std::uint8_t((x == c[0] ? 1 : 0) | (y == c[1] ? 2 : 0) | (z == c[2] ? 4 : 0));
-                        mTemp.push_back(e);
-                    }
+            for (int k = 0; k < 3; ++k) {
+                it.first[k] = std::int32_t(c[k]); // (cells relative to the origin: 0 <= x, y, z < 2^21; queries clamped)
+                it.span[k] = std::uint8_t(c[k + 3] - c[k]);
+            }
+            entries += std::size_t(it.span[0] + 1) * std::size_t(it.span[1] + 1) * std::size_t(it.span[2] + 1);
         }
         // At least 2 kMaxSpan buckets: a query's run of cells never meets itself after wrapping.
         std::size_t buckets = 256;
-        while (buckets < mTemp.size() && buckets < (std::size_t(1) << 26)) buckets *= 2;
+        while ((buckets < entries || buckets < minBuckets) && buckets < (std::size_t(1) << 26)) buckets *= 2;
         mMask = buckets - 1;
         mStart.assign(buckets + 1, 0);
-        mBucket.resize(mTemp.size());
-        for (std::size_t t = 0; t < mTemp.size(); ++t) {
-            mBucket[t] = std::uint32_t(bucketOf(mTemp[t].key));
-            ++mStart[mBucket[t] + 1];
-        }
+        auto forCells = [&](const Item& it, auto&& f) {
+            for (std::int64_t x = it.first[0]; x <= it.first[0] + it.span[0]; ++x)
+                for (std::int64_t y = it.first[1]; y <= it.first[1] + it.span[1]; ++y) {
+                    const std::uint64_t column = packCell(x, y, 0);
+                    const std::uint8_t lowestXY = std::uint8_t((x == it.first[0] ? 1 : 0) | (y == it.first[1] ? 2 : 0));
+                    for (std::int64_t z = it.first[2]; z <= it.first[2] + it.span[2]; ++z)
+                        f(column | std::uint64_t(z), std::uint8_t(lowestXY | (z == it.first[2] ? 4 : 0)));
+                }
+        };
+        for (const Item& it : mItems)
+            if (it.inCells) forCells(it, [&](std::uint64_t key, std::uint8_t) { ++mStart[bucketOf(key) + 1]; });
         for (std::size_t b = 0; b < buckets; ++b) mStart[b + 1] += mStart[b];
-        mEntries.resize(mTemp.size());
+        mEntries.resize(entries);
         mFill.assign(mStart.begin(), mStart.end() - 1);
-        for (std::size_t t = 0; t < mTemp.size(); ++t) mEntries[mFill[mBucket[t]]++] = mTemp[t];
+        for (std::size_t i = 0; i < mItems.size(); ++i) {
+            const Item& it = mItems[i];
+            if (!it.inCells) continue;
+            forCells(it, [&](std::uint64_t key, std::uint8_t lowest) {
+                mEntries[mFill[bucketOf(key)]++] = Entry{key, std::int32_t(i), it.box, lowest};
+            });
+        }
+    }
+
+    /// The bucket count (a power of two, see pairs()).
+    std::size_t buckets() const { return mMask + 1; }
+
+    /// Calls f(a, b) once for every item a of `first` and item b of `second` (grids built in the
+    /// same frame) whose boxes overlap, but for the large ones (too large for the cells, or not
+    /// finite: pairsWithLarge): in the cell of the
+    /// lower corner of the boxes' intersection, found in the buckets [b0, b1) of the grid with
+    /// more buckets (the other's bucket counts divide it: a key's bucket in it, masked). Both
+    /// grids' entries of a cell are met in a bucket of each, and only there: one pass over the
+    /// buckets instead of a query per item (the broad phase of a step from scratch, ccd.cpp).
+    template <class F>
+    static void pairs(const PackedBoxGrid& first, const PackedBoxGrid& second, std::size_t b0, std::size_t b1, F&& f)
+    {
+        const bool firstMore = first.mMask >= second.mMask;
+        const PackedBoxGrid& more = firstMore ? first : second;
+        const PackedBoxGrid& fewer = firstMore ? second : first;
+        for (std::size_t b = b0; b < b1; ++b) {
+            const std::uint32_t m0 = more.mStart[b], m1 = more.mStart[b + 1];
+            if (m0 == m1) continue;
+            const std::size_t c = b & fewer.mMask;
+            const std::uint32_t f0 = fewer.mStart[c], f1 = fewer.mStart[c + 1];
+            if (f0 == f1) continue;
+            for (std::uint32_t i = m0; i < m1; ++i) {
+                const Entry& x = more.mEntries[i];
+                for (std::uint32_t j = f0; j < f1; ++j) {
+                    const Entry& y = fewer.mEntries[j];
+                    if (x.key == y.key && meet(x, y)) firstMore ? f(int(x.item), int(y.item)) : f(int(y.item), int(x.item));
+                }
+            }
+        }
+    }
+
+    /// Within one grid: f(a, b), a < b, once for every two items whose boxes overlap, but for the
+    /// large ones (as above), from the buckets [b0, b1).
+    template <class F>
+    void pairs(std::size_t b0, std::size_t b1, F&& f) const
+    {
+        for (std::size_t b = b0; b < b1; ++b) {
+            const std::uint32_t s = mStart[b], e = mStart[b + 1];
+            // (a bucket's entries are in item order: the build sorts them stably; an item's
+            // entries in one bucket are of different cells)
+            for (std::uint32_t i = s; i + 1 < e; ++i) {
+                const Entry& x = mEntries[i];
+                for (std::uint32_t j = i + 1; j < e; ++j) {
+                    const Entry& y = mEntries[j];
+                    if (x.key == y.key && meet(x, y)) f(int(x.item), int(y.item));
+                }
+            }
+        }
+    }
+
+    /// The pairs pairs() leaves out, those with a large item (rare: a vertex flung far, a huge
+    /// face), from a pass over the other grid's items: f(a, b) once for every item a of
+    /// `first` and b of `second` whose boxes overlap, one of them large.
+    template <class F>
+    static void pairsWithLarge(const PackedBoxGrid& first, const PackedBoxGrid& second, F&& f)
+    {
+        for (const Entry& e : first.mLarge)
+            for (std::size_t b = 0; b < second.mItems.size(); ++b)
+                if (overlapsF(e.box, second.mItems[b].box)) f(int(e.item), int(b));
+        for (const Entry& e : second.mLarge)
+            for (std::size_t a = 0; a < first.mItems.size(); ++a)
+                if (first.mItems[a].inCells && overlapsF(first.mItems[a].box, e.box)) f(int(a), int(e.item));
+    }
+    /// Within one grid: f(a, b), a < b, once for every two items whose boxes overlap, one of them
+    /// large.
+    template <class F>
+    void pairsWithLarge(F&& f) const
+    {
+        for (const Entry& e : mLarge)
+            for (std::size_t b = 0; b < mItems.size(); ++b)
+                if (int(b) != e.item && (mItems[b].inCells || int(b) > e.item) && overlapsF(e.box, mItems[b].box))
+                    int(b) < e.item ? f(int(b), int(e.item)) : f(int(e.item), int(b));
     }
 
     /// Calls f(item) once for every item above `after` whose box overlaps `q` (after = -1: all).
@@ -510,6 +622,17 @@ private:
         std::memcpy(&f, &bits, sizeof bits);
         return f;
     }
+    /// Two entries of one cell: their boxes overlap, and the cell is the lower corner's of their
+    /// intersection (on each axis the first cell of one of them).
+    static bool meet(const Entry& x, const Entry& y)
+    {
+        return ((x.lowest | y.lowest) & 7) == 7 && x.box[0] <= y.box[3] && y.box[0] <= x.box[3] &&
+               x.box[1] <= y.box[4] && y.box[1] <= x.box[4] && x.box[2] <= y.box[5] && y.box[2] <= x.box[5];
+    }
+    static bool overlapsF(const std::array<float, 6>& a, const std::array<float, 6>& b)
+    {
+        return a[0] <= b[3] && b[0] <= a[3] && a[1] <= b[4] && b[1] <= a[4] && a[2] <= b[5] && b[2] <= a[5];
+    }
     static bool overlaps(const Box6& q, const std::array<float, 6>& b)
     {
         return q[0] <= b[3] && b[0] <= q[3] && q[1] <= b[4] && b[1] <= q[4] && q[2] <= b[5] && b[2] <= q[5];
@@ -535,8 +658,16 @@ private:
     double mInvCell = 1.0;
     std::array<double, 3> mOrigin = {0, 0, 0};
     std::size_t mMask = 63;
-    std::vector<std::uint32_t> mStart, mFill, mBucket;
-    std::vector<Entry> mEntries, mTemp, mLarge;
+    /// An item's float box and cells, between the two passes of build().
+    struct Item {
+        std::array<float, 6> box;
+        std::array<std::int32_t, 3> first; ///< its first cell
+        std::array<std::uint8_t, 3> span;  ///< and how many more on each axis (<= kMaxSpan)
+        bool inCells;                      ///< (else in mLarge)
+    };
+    std::vector<std::uint32_t> mStart, mFill;
+    std::vector<Entry> mEntries, mLarge;
+    std::vector<Item> mItems;
 };
 
 } // namespace riemesh::detail
