@@ -117,7 +117,67 @@ void checkPairsAgainstBruteForce(const std::vector<Box6>& first, const std::vect
     }
 }
 
+/// The same from a sparse grid of `first` (PackedBoxGrid::buildSparse, in the frame of `second`
+/// alone, with its bucket count) paired with a grid of `second`, dense or sparse, and the sparse
+/// grid with itself.
+void checkSparsePairsAgainstBruteForce(const std::vector<Box6>& first, const std::vector<Box6>& second, double cell,
+                                       bool secondSparse)
+{
+    const PackedBoxGrid::Frame frame = PackedBoxGrid::frameFor({&second}, cell); // (first may lie outside it)
+    PackedBoxGrid dense, sparse, other;
+    dense.build(second, frame);
+    sparse.buildSparse(first, frame, dense.buckets());
+    if (secondSparse) other.buildSparse(second, frame, dense.buckets());
+    const PackedBoxGrid& paired = secondSparse ? other : dense;
+    std::vector<std::pair<int, int>> got, gotSelf;
+    const std::size_t half = sparse.entries() / 2;
+    for (const auto& [e0, e1] : {std::pair<std::size_t, std::size_t>{0, half}, {half, sparse.entries()}}) {
+        PackedBoxGrid::pairsSparse(sparse, paired, e0, e1, [&](int a, int b) { got.push_back({a, b}); });
+        sparse.pairsFromEntries(e0, e1, [&](int a, int b) { gotSelf.push_back({a, b}); });
+    }
+    PackedBoxGrid::pairsWithLarge(sparse, paired, [&](int a, int b) { got.push_back({a, b}); });
+    sparse.pairsWithLarge([&](int a, int b) { gotSelf.push_back({a, b}); });
+    for (const bool self : {false, true}) {
+        std::vector<std::pair<int, int>>& pairs = self ? gotSelf : got;
+        const std::vector<Box6>& other_ = self ? first : second;
+        std::sort(pairs.begin(), pairs.end());
+        REQUIRE(std::adjacent_find(pairs.begin(), pairs.end()) == pairs.end()); // each pair once
+        std::vector<std::pair<int, int>> want;
+        for (std::size_t i = 0; i < first.size(); ++i)
+            for (std::size_t j = self ? i + 1 : 0; j < other_.size(); ++j)
+                if (boxesOverlap(first[i], other_[j])) want.push_back({int(i), int(j)});
+        CHECK(std::includes(pairs.begin(), pairs.end(), want.begin(), want.end()));
+        for (const auto& [i, j] : pairs) {
+            CHECK((!self || i < j));
+            Box6 grown = first[std::size_t(i)];
+            for (int k = 0; k < 6; ++k) grown[k] += (k < 3 ? -1 : 1) * 1e-6 * (1 + std::abs(grown[k]));
+            CHECK(boxesOverlap(other_[std::size_t(j)], grown));
+        }
+    }
+}
+
 } // namespace
+
+TEST_CASE("box grid: a sparse grid paired with a dense one, with a sparse one and with itself, against brute force")
+{
+    // The collision-safe step pairs grids of its dirty primitives (few, in the anchored grids'
+    // frame: some moved below or beyond the boxes that frame was made for) with the anchored grids.
+    std::mt19937 rng(37);
+    for (double centre : {0.0, 1.0e6}) {
+        std::vector<Box6> dirty, anchored;
+        for (int i = 0; i < 2000; ++i) anchored.push_back(randomBox(rng, centre, 20.0, i % 150 == 0 ? 200.0 : 1.5));
+        for (int i = 0; i < 250; ++i) dirty.push_back(randomBox(rng, centre - 6.0, 30.0, i % 50 == 0 ? 0.0 : 1.0));
+        dirty[3] = {centre - 400, centre - 400, centre - 400, centre - 399, centre - 399, centre - 399}; // (far below)
+        dirty[9] = {std::nan(""), 0, 0, 1, 1, 1};
+        for (double cell : {0.7, 2.5})
+            for (bool secondSparse : {false, true}) {
+                CAPTURE(centre);
+                CAPTURE(cell);
+                CAPTURE(secondSparse);
+                checkSparsePairsAgainstBruteForce(dirty, anchored, cell, secondSparse);
+            }
+    }
+}
 
 TEST_CASE("box grid: pairing two grids, and one grid with itself, against brute force")
 {

@@ -11,6 +11,7 @@
 // Deterministic: the order of the reports depends only on the insertions. Private to core/src.
 #pragma once
 
+#include <algorithm>
 #include <array>
 #include <cmath>
 #include <cstdint>
@@ -384,9 +385,12 @@ public:
         double cell = cellSize;
         for (int k = 0; k < 3; ++k)
             if (all[k] <= all[k + 3]) cell = std::max(cell, (all[k + 3] - all[k]) / double(1 << 20));
+        // The origin kMargin cells below the boxes: a grid built later in this frame (the dirty
+        // primitives of a step, paired with the anchored ones) has room below them too.
         Frame frame;
         frame.invCell = 1.0 / cell;
-        for (int k = 0; k < 3; ++k) frame.origin[k] = all[k] <= all[k + 3] ? std::floor(all[k] * frame.invCell) : 0.0;
+        for (int k = 0; k < 3; ++k)
+            frame.origin[k] = all[k] <= all[k + 3] ? std::floor(all[k] * frame.invCell) - double(kMargin) : 0.0;
         return frame;
     }
 
@@ -407,19 +411,9 @@ public:
         std::size_t entries = 0;
         for (std::size_t i = 0; i < boxes.size(); ++i) {
             Item& it = mItems[i];
-            for (int k = 0; k < 3; ++k) {
-                it.box[k] = down(boxes[i][k]);
-                it.box[k + 3] = up(boxes[i][k + 3]);
-            }
-            std::array<std::int64_t, 6> c{};
-            it.inCells = cellRange(it.box, c);
-            if (!it.inCells) {
+            if (!placeItem(boxes[i], it)) {
                 mLarge.push_back(Entry{0, std::int32_t(i), it.box, 0});
                 continue;
-            }
-            for (int k = 0; k < 3; ++k) {
-                it.first[k] = std::int32_t(c[k]); // (cells relative to the origin: 0 <= x, y, z < 2^21; queries clamped)
-                it.span[k] = std::uint8_t(c[k + 3] - c[k]);
             }
             entries += std::size_t(it.span[0] + 1) * std::size_t(it.span[1] + 1) * std::size_t(it.span[2] + 1);
         }
@@ -427,16 +421,8 @@ public:
         std::size_t buckets = 256;
         while ((buckets < entries || buckets < minBuckets) && buckets < (std::size_t(1) << 26)) buckets *= 2;
         mMask = buckets - 1;
+        mSparse = false;
         mStart.assign(buckets + 1, 0);
-        auto forCells = [&](const Item& it, auto&& f) {
-            for (std::int64_t x = it.first[0]; x <= it.first[0] + it.span[0]; ++x)
-                for (std::int64_t y = it.first[1]; y <= it.first[1] + it.span[1]; ++y) {
-                    const std::uint64_t column = packCell(x, y, 0);
-                    const std::uint8_t lowestXY = std::uint8_t((x == it.first[0] ? 1 : 0) | (y == it.first[1] ? 2 : 0));
-                    for (std::int64_t z = it.first[2]; z <= it.first[2] + it.span[2]; ++z)
-                        f(column | std::uint64_t(z), std::uint8_t(lowestXY | (z == it.first[2] ? 4 : 0)));
-                }
-        };
         for (const Item& it : mItems)
             if (it.inCells) forCells(it, [&](std::uint64_t key, std::uint8_t) { ++mStart[bucketOf(key) + 1]; });
         for (std::size_t b = 0; b < buckets; ++b) mStart[b + 1] += mStart[b];
@@ -449,6 +435,40 @@ public:
                 mEntries[mFill[bucketOf(key)]++] = Entry{key, std::int32_t(i), it.box, lowest};
             });
         }
+    }
+
+    /// A grid of few boxes (a step's dirty primitives) in a given frame, with `buckets` buckets
+    /// (those of the grid it is paired with, pairsSparse): its entries sorted by bucket, without
+    /// a table of the buckets (which would cost as much as the grid it is paired with). Only
+    /// paired (pairsSparse, pairsFromEntries, pairsWithLarge), not queried.
+    void buildSparse(const std::vector<Box6>& boxes, const Frame& frame, std::size_t buckets)
+    {
+        mLarge.clear();
+        mEntries.clear();
+        mStart.clear();
+        mInvCell = frame.invCell;
+        mOrigin = frame.origin;
+        mMask = buckets - 1;
+        mSparse = true;
+        mItems.resize(boxes.size());
+        for (std::size_t i = 0; i < boxes.size(); ++i) {
+            Item& it = mItems[i];
+            if (!placeItem(boxes[i], it)) {
+                mLarge.push_back(Entry{0, std::int32_t(i), it.box, 0});
+                continue;
+            }
+            forCells(it, [&](std::uint64_t key, std::uint8_t lowest) {
+                mEntries.push_back(Entry{key, std::int32_t(i), it.box, lowest});
+            });
+        }
+        // By bucket, in the order made within one (sorting (bucket, position) keys).
+        mOrder.resize(mEntries.size());
+        for (std::size_t i = 0; i < mEntries.size(); ++i)
+            mOrder[i] = (std::uint64_t(bucketOf(mEntries[i].key)) << 32) | i;
+        std::sort(mOrder.begin(), mOrder.end());
+        mSorted.resize(mEntries.size());
+        for (std::size_t i = 0; i < mOrder.size(); ++i) mSorted[i] = mEntries[std::size_t(mOrder[i] & 0xffffffffu)];
+        mEntries.swap(mSorted);
     }
 
     /// The bucket count (a power of two, see pairs()).
@@ -482,6 +502,52 @@ public:
             }
         }
     }
+
+    /// The same for a grid `sparse` with few entries (a step's dirty primitives) and one with as
+    /// many buckets (the anchored ones, or another sparse one): each entry of sparse's [e0, e1)
+    /// against its bucket in `dense` (rather than a walk over every bucket). f(sparse item, dense
+    /// item).
+    template <class F>
+    static void pairsSparse(const PackedBoxGrid& sparse, const PackedBoxGrid& dense, std::size_t e0, std::size_t e1,
+                            F&& f)
+    {
+        for (std::size_t i = e0; i < e1; ++i) {
+            const Entry& x = sparse.mEntries[i];
+            const std::size_t b = dense.bucketOf(x.key);
+            std::size_t j = 0, end = 0;
+            if (!dense.mSparse) {
+                j = dense.mStart[b], end = dense.mStart[b + 1];
+            } else { // (two sparse grids: the other's run of that bucket)
+                const auto& d = dense.mEntries;
+                j = std::size_t(std::lower_bound(d.begin(), d.end(), b, [&](const Entry& y, std::size_t bucket) {
+                                    return dense.bucketOf(y.key) < bucket;
+                                }) - d.begin());
+                for (end = j; end < d.size() && dense.bucketOf(d[end].key) == b;) ++end;
+            }
+            for (; j < end; ++j) {
+                const Entry& y = dense.mEntries[j];
+                if (x.key == y.key && meet(x, y)) f(int(x.item), int(y.item));
+            }
+        }
+    }
+    /// Within one grid with few entries: f(a, b), a < b, for every two items whose boxes overlap
+    /// (as pairs()), each of the entries [e0, e1) against the later ones of its bucket.
+    template <class F>
+    void pairsFromEntries(std::size_t e0, std::size_t e1, F&& f) const
+    {
+        for (std::size_t i = e0; i < e1; ++i) {
+            const Entry& x = mEntries[i];
+            const std::size_t b = bucketOf(x.key);
+            const std::size_t end = mSparse ? mEntries.size() : std::size_t(mStart[b + 1]);
+            for (std::size_t j = i + 1; j < end; ++j) {
+                const Entry& y = mEntries[j];
+                if (mSparse && bucketOf(y.key) != b) break; // (the end of its bucket)
+                if (x.key == y.key && meet(x, y)) f(int(x.item), int(y.item));
+            }
+        }
+    }
+    /// Entries of the grid (for the ranges of pairsSparse and pairsFromEntries).
+    std::size_t entries() const { return mEntries.size(); }
 
     /// Within one grid: f(a, b), a < b, once for every two items whose boxes overlap, but for the
     /// large ones (as above), from the buckets [b0, b1).
@@ -595,6 +661,7 @@ private:
     };
     static constexpr std::int64_t kMaxSpan = 64;
     static constexpr std::int64_t kCoordMask = (std::int64_t(1) << 21) - 1;
+    static constexpr std::int64_t kMargin = std::int64_t(1) << 19; ///< cells below a frame's boxes (frameFor)
     static constexpr double kHuge = 1e30;
     /// x rounded to a float toward -infinity (up: toward +infinity); the float neighbour is
     /// taken on the bits (std::nextafter is a library call, and this runs six times a query).
@@ -621,6 +688,42 @@ private:
         bits = (f > 0) == (direction > 0) ? bits + 1 : bits - 1; // away from zero: larger magnitude
         std::memcpy(&f, &bits, sizeof bits);
         return f;
+    }
+    /// An item's float box and cells, between the two passes of build().
+    struct Item {
+        std::array<float, 6> box;
+        std::array<std::int32_t, 3> first; ///< its first cell
+        std::array<std::uint8_t, 3> span;  ///< and how many more on each axis (<= kMaxSpan)
+        bool inCells;                      ///< (else in mLarge)
+    };
+    /// An item's float box and cells; false if it is large (see pairsWithLarge).
+    bool placeItem(const Box6& box, Item& it) const
+    {
+        for (int k = 0; k < 3; ++k) {
+            it.box[k] = down(box[k]);
+            it.box[k + 3] = up(box[k + 3]);
+        }
+        std::array<std::int64_t, 6> c{};
+        it.inCells = cellRange(it.box, c);
+        if (!it.inCells) return false;
+        for (int k = 0; k < 3; ++k) {
+            it.first[k] = std::int32_t(c[k]); // (cells relative to the origin: 0 <= x, y, z < 2^21; queries clamped)
+            it.span[k] = std::uint8_t(c[k + 3] - c[k]);
+        }
+        return true;
+    }
+    /// f(key, lowest) for each cell of a placed item.
+    template <class F>
+    static void forCells(const Item& it, F&& f)
+    {
+        for (std::int64_t x = it.first[0]; x <= it.first[0] + it.span[0]; ++x)
+            for (std::int64_t y = it.first[1]; y <= it.first[1] + it.span[1]; ++y) {
+                const std::uint64_t column = packCell(x, y, 0);
+                const std::uint8_t lowestXY = std::uint8_t((x == it.first[0] ? 1 : 0) | (y == it.first[1] ? 2 : 0));
+                for (std::int64_t z = it.first[2]; z <= it.first[2] + it.span[2]; ++z)
+                    f(column | (std::uint64_t(z) & std::uint64_t(kCoordMask)),
+                      std::uint8_t(lowestXY | (z == it.first[2] ? 4 : 0)));
+            }
     }
     /// Two entries of one cell: their boxes overlap, and the cell is the lower corner's of their
     /// intersection (on each axis the first cell of one of them).
@@ -658,16 +761,12 @@ private:
     double mInvCell = 1.0;
     std::array<double, 3> mOrigin = {0, 0, 0};
     std::size_t mMask = 63;
-    /// An item's float box and cells, between the two passes of build().
-    struct Item {
-        std::array<float, 6> box;
-        std::array<std::int32_t, 3> first; ///< its first cell
-        std::array<std::uint8_t, 3> span;  ///< and how many more on each axis (<= kMaxSpan)
-        bool inCells;                      ///< (else in mLarge)
-    };
     std::vector<std::uint32_t> mStart, mFill;
     std::vector<Entry> mEntries, mLarge;
     std::vector<Item> mItems;
+    bool mSparse = false; ///< built by buildSparse (no mStart)
+    std::vector<std::uint64_t> mOrder; ///< (buildSparse's scratch)
+    std::vector<Entry> mSorted;        ///< (buildSparse's scratch)
 };
 
 } // namespace riemesh::detail
