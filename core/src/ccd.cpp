@@ -324,6 +324,27 @@ void pairInChunks(std::size_t buckets, std::vector<std::vector<T>>& lists, std::
     for (std::size_t c = 0; c < chunks; ++c) out.insert(out.end(), lists[c].begin(), lists[c].end());
 }
 
+/// Every vertex-face pair of two grids and edge-edge pair of the third built to be paired
+/// (buildGridsToPair) whose boxes overlap, large ones included: vertexFace(vertex item, face
+/// item, list) and edgeEdge(edge item, later edge item, list), appending to `out` through lists
+/// kept per chunk (pairInChunks).
+template <class T, class VertexFace, class EdgeEdge>
+void pairAll(const detail::PackedBoxGrid& vertexGrid, const detail::PackedBoxGrid& faceGrid,
+             const detail::PackedBoxGrid& edgeGrid, std::vector<std::vector<T>>& lists, std::vector<T>& out,
+             VertexFace&& vertexFace, EdgeEdge&& edgeEdge)
+{
+    pairInChunks(std::max(vertexGrid.buckets(), faceGrid.buckets()), lists, out,
+                 [&](std::size_t b0, std::size_t b1, std::vector<T>& found) {
+                     detail::PackedBoxGrid::pairs(vertexGrid, faceGrid, b0, b1,
+                                                  [&](int k, int f) { vertexFace(k, f, found); });
+                 });
+    pairInChunks(edgeGrid.buckets(), lists, out, [&](std::size_t b0, std::size_t b1, std::vector<T>& found) {
+        edgeGrid.pairs(b0, b1, [&](int e, int h) { edgeEdge(e, h, found); });
+    });
+    detail::PackedBoxGrid::pairsWithLarge(vertexGrid, faceGrid, [&](int k, int f) { vertexFace(k, f, out); });
+    edgeGrid.pairsWithLarge([&](int e, int h) { edgeEdge(e, h, out); });
+}
+
 /// The broad phase of one step from scratch: every vertex-face and edge-edge pair whose swept
 /// boxes (the face's grown by eta, the edges' by eta / 2 each) overlap and that is within reach.
 /// The pairs of boxes come from pairing the grids cell by cell (PackedBoxGrid::pairs), not from
@@ -360,16 +381,7 @@ void allCandidates(const StepGeometry& g, const std::vector<int>& live, const st
         if (!shareVertex(x, y) && detail::boxesOverlap(edgeBox[std::size_t(e)], edgeBox[std::size_t(h)]) && g.edgeEdge(x, y))
             found.push_back(edgeEdgeQuad(x, y));
     };
-    pairInChunks(std::max(vertexGrid.buckets(), faceGrid.buckets()), lists, candidates,
-                 [&](std::size_t b0, std::size_t b1, std::vector<Quad>& found) {
-                     detail::PackedBoxGrid::pairs(vertexGrid, faceGrid, b0, b1,
-                                                  [&](int k, int f) { vertexFace(k, f, found); });
-                 });
-    pairInChunks(edgeGrid.buckets(), lists, candidates, [&](std::size_t b0, std::size_t b1, std::vector<Quad>& found) {
-        edgeGrid.pairs(b0, b1, [&](int e, int h) { edgeEdge(e, h, found); });
-    });
-    detail::PackedBoxGrid::pairsWithLarge(vertexGrid, faceGrid, [&](int k, int f) { vertexFace(k, f, candidates); });
-    edgeGrid.pairsWithLarge([&](int e, int h) { edgeEdge(e, h, candidates); });
+    pairAll(vertexGrid, faceGrid, edgeGrid, lists, candidates, vertexFace, edgeEdge);
 }
 
 } // namespace
@@ -655,16 +667,7 @@ void SafeStepCache::Impl::rebuild(const Mesh& mesh, const std::vector<Vec3>& anc
                                                         anchor[std::size_t(y[0])], anchor[std::size_t(y[1])]);
         if (d2 < C2) found.push_back({{x[0], x[1], y[0], y[1]}, std::sqrt(d2)});
     };
-    pairInChunks(std::max(vertexGrid.buckets(), faceGrid.buckets()), nearLists, near,
-                 [&](std::size_t b0, std::size_t b1, std::vector<Near>& found) {
-                     detail::PackedBoxGrid::pairs(vertexGrid, faceGrid, b0, b1,
-                                                  [&](int k, int f) { vertexFace(k, f, found); });
-                 });
-    pairInChunks(edgeGrid.buckets(), nearLists, near, [&](std::size_t b0, std::size_t b1, std::vector<Near>& found) {
-        edgeGrid.pairs(b0, b1, [&](int e, int h) { edgeEdge(e, h, found); });
-    });
-    detail::PackedBoxGrid::pairsWithLarge(vertexGrid, faceGrid, [&](int k, int f) { vertexFace(k, f, near); });
-    edgeGrid.pairsWithLarge([&](int e, int h) { edgeEdge(e, h, near); });
+    pairAll(vertexGrid, faceGrid, edgeGrid, nearLists, near, vertexFace, edgeEdge);
     clearance.assign(vertices0, C);
     for (const Near& n : near)
         for (int v : n.v) clearance[std::size_t(v)] = std::min(clearance[std::size_t(v)], n.d);

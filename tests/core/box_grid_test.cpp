@@ -80,6 +80,27 @@ TEST_CASE("box grid: thousands of boxes, against brute force")
 
 namespace {
 
+/// The pairs reported (`got`, in any order) against brute force: each once, every overlapping
+/// pair of first x other (same: of first with itself, i < j), and only those (or boxes touching
+/// within a float's precision).
+void checkPairs(std::vector<std::pair<int, int>>& got, const std::vector<Box6>& first, const std::vector<Box6>& other,
+                bool same)
+{
+    std::sort(got.begin(), got.end());
+    REQUIRE(std::adjacent_find(got.begin(), got.end()) == got.end());
+    std::vector<std::pair<int, int>> want;
+    for (std::size_t i = 0; i < first.size(); ++i)
+        for (std::size_t j = same ? i + 1 : 0; j < other.size(); ++j)
+            if (boxesOverlap(first[i], other[j])) want.push_back({int(i), int(j)});
+    CHECK(std::includes(got.begin(), got.end(), want.begin(), want.end()));
+    for (const auto& [i, j] : got) {
+        CHECK((!same || i < j));
+        Box6 grown = first[std::size_t(i)];
+        for (int k = 0; k < 6; ++k) grown[k] += (k < 3 ? -1 : 1) * 1e-6 * (1 + std::abs(grown[k]));
+        CHECK(boxesOverlap(other[std::size_t(j)], grown));
+    }
+}
+
 /// Every overlapping pair of first x second (or of first with itself, a < b) once from pairs()
 /// and pairsWithLarge(), against brute force.
 void checkPairsAgainstBruteForce(const std::vector<Box6>& first, const std::vector<Box6>* second, double cell,
@@ -102,19 +123,7 @@ void checkPairsAgainstBruteForce(const std::vector<Box6>& first, const std::vect
     }
     if (same) a.pairsWithLarge(report);
     else PackedBoxGrid::pairsWithLarge(a, b, report);
-    std::sort(got.begin(), got.end());
-    REQUIRE(std::adjacent_find(got.begin(), got.end()) == got.end()); // each pair once
-    std::vector<std::pair<int, int>> want;
-    for (std::size_t i = 0; i < first.size(); ++i)
-        for (std::size_t j = same ? i + 1 : 0; j < other.size(); ++j)
-            if (boxesOverlap(first[i], other[j])) want.push_back({int(i), int(j)});
-    CHECK(std::includes(got.begin(), got.end(), want.begin(), want.end()));
-    for (const auto& [i, j] : got) {
-        CHECK((!same || i < j));
-        Box6 grown = first[std::size_t(i)];
-        for (int k = 0; k < 6; ++k) grown[k] += (k < 3 ? -1 : 1) * 1e-6 * (1 + std::abs(grown[k]));
-        CHECK(boxesOverlap(other[std::size_t(j)], grown)); // (or touching within a float's precision)
-    }
+    checkPairs(got, first, other, same);
 }
 
 /// The same from a sparse grid of `first` (PackedBoxGrid::buildSparse, in the frame of `second`
@@ -137,23 +146,8 @@ void checkSparsePairsAgainstBruteForce(const std::vector<Box6>& first, const std
     }
     PackedBoxGrid::pairsWithLarge(sparse, paired, [&](int a, int b) { got.push_back({a, b}); });
     sparse.pairsWithLarge([&](int a, int b) { gotSelf.push_back({a, b}); });
-    for (const bool self : {false, true}) {
-        std::vector<std::pair<int, int>>& pairs = self ? gotSelf : got;
-        const std::vector<Box6>& other_ = self ? first : second;
-        std::sort(pairs.begin(), pairs.end());
-        REQUIRE(std::adjacent_find(pairs.begin(), pairs.end()) == pairs.end()); // each pair once
-        std::vector<std::pair<int, int>> want;
-        for (std::size_t i = 0; i < first.size(); ++i)
-            for (std::size_t j = self ? i + 1 : 0; j < other_.size(); ++j)
-                if (boxesOverlap(first[i], other_[j])) want.push_back({int(i), int(j)});
-        CHECK(std::includes(pairs.begin(), pairs.end(), want.begin(), want.end()));
-        for (const auto& [i, j] : pairs) {
-            CHECK((!self || i < j));
-            Box6 grown = first[std::size_t(i)];
-            for (int k = 0; k < 6; ++k) grown[k] += (k < 3 ? -1 : 1) * 1e-6 * (1 + std::abs(grown[k]));
-            CHECK(boxesOverlap(other_[std::size_t(j)], grown));
-        }
-    }
+    checkPairs(got, first, second, false);
+    checkPairs(gotSelf, first, first, true);
 }
 
 } // namespace
