@@ -290,36 +290,35 @@ void findInChunks(std::size_t count, std::vector<std::vector<T>>& lists, std::ve
 }
 
 /// Builds the grids of the vertices', the faces' and the edges' boxes in one frame (cells of
-/// `cell`, see PackedBoxGrid::frameFor), to be paired: the faces' and the edges' at once, then
-/// the vertices' with as many buckets as the faces' (paired bucket by bucket).
+/// `cell`, see PackedBoxGrid::frameFor), to be paired, each on a thread of its own when there
+/// are several.
 detail::PackedBoxGrid::Frame buildGridsToPair(const std::vector<Box6>& vertexBoxes, detail::PackedBoxGrid& vertexGrid,
                                               const std::vector<Box6>& faceBoxes, detail::PackedBoxGrid& faceGrid,
                                               const std::vector<Box6>& edgeBoxes, detail::PackedBoxGrid& edgeGrid,
                                               double cell)
 {
     const auto frame = detail::PackedBoxGrid::frameFor({&vertexBoxes, &faceBoxes, &edgeBoxes}, cell);
-    detail::parallelFor(0, 2, 1, [&](std::size_t k) {
-        k ? edgeGrid.build(edgeBoxes, frame) : faceGrid.build(faceBoxes, frame);
-    });
-    vertexGrid.build(vertexBoxes, frame, faceGrid.buckets());
+    const std::array<std::pair<const std::vector<Box6>*, detail::PackedBoxGrid*>, 3> jobs = {
+        {{&edgeBoxes, &edgeGrid}, {&faceBoxes, &faceGrid}, {&vertexBoxes, &vertexGrid}}};
+    detail::parallelFor(0, jobs.size(), 1, [&](std::size_t k) { jobs[k].second->build(*jobs[k].first, frame); });
     return frame;
 }
 
-/// Buckets per chunk of pairInChunks.
+/// Grid entries per chunk of pairInChunks.
 constexpr std::size_t kPairChunk = 1024;
 
-/// Runs pairs(b0, b1, found) over the buckets [0, buckets) in parallel, in fixed chunks of
-/// kPairChunk buckets, each appending to its own list; the lists are then appended to `out` in
+/// Runs pairs(e0, e1, found) over a grid's entries [0, entries) in parallel, in fixed chunks of
+/// kPairChunk entries, each appending to its own list; the lists are then appended to `out` in
 /// chunk order (the same for any thread count, as findInChunks).
 template <class T, class Pairs>
-void pairInChunks(std::size_t buckets, std::vector<std::vector<T>>& lists, std::vector<T>& out, Pairs&& pairs)
+void pairInChunks(std::size_t entries, std::vector<std::vector<T>>& lists, std::vector<T>& out, Pairs&& pairs)
 {
-    const std::size_t chunks = (buckets + kPairChunk - 1) / kPairChunk;
+    const std::size_t chunks = (entries + kPairChunk - 1) / kPairChunk;
     if (lists.size() < chunks) lists.resize(chunks);
     detail::parallelFor(0, chunks, 1, [&](std::size_t c) {
         std::vector<T>& found = lists[c];
         found.clear();
-        pairs(c * kPairChunk, std::min(buckets, (c + 1) * kPairChunk), found);
+        pairs(c * kPairChunk, std::min(entries, (c + 1) * kPairChunk), found);
     });
     for (std::size_t c = 0; c < chunks; ++c) out.insert(out.end(), lists[c].begin(), lists[c].end());
 }
@@ -333,13 +332,11 @@ void pairAll(const detail::PackedBoxGrid& vertexGrid, const detail::PackedBoxGri
              const detail::PackedBoxGrid& edgeGrid, std::vector<std::vector<T>>& lists, std::vector<T>& out,
              VertexFace&& vertexFace, EdgeEdge&& edgeEdge)
 {
-    pairInChunks(std::max(vertexGrid.buckets(), faceGrid.buckets()), lists, out,
-                 [&](std::size_t b0, std::size_t b1, std::vector<T>& found) {
-                     detail::PackedBoxGrid::pairs(vertexGrid, faceGrid, b0, b1,
-                                                  [&](int k, int f) { vertexFace(k, f, found); });
-                 });
-    pairInChunks(edgeGrid.buckets(), lists, out, [&](std::size_t b0, std::size_t b1, std::vector<T>& found) {
-        edgeGrid.pairs(b0, b1, [&](int e, int h) { edgeEdge(e, h, found); });
+    pairInChunks(vertexGrid.entries(), lists, out, [&](std::size_t e0, std::size_t e1, std::vector<T>& found) {
+        detail::PackedBoxGrid::pairsAcross(vertexGrid, faceGrid, e0, e1, [&](int k, int f) { vertexFace(k, f, found); });
+    });
+    pairInChunks(edgeGrid.entries(), lists, out, [&](std::size_t e0, std::size_t e1, std::vector<T>& found) {
+        edgeGrid.pairsWithin(e0, e1, [&](int e, int h) { edgeEdge(e, h, found); });
     });
     detail::PackedBoxGrid::pairsWithLarge(vertexGrid, faceGrid, [&](int k, int f) { vertexFace(k, f, out); });
     edgeGrid.pairsWithLarge([&](int e, int h) { edgeEdge(e, h, out); });
@@ -347,7 +344,8 @@ void pairAll(const detail::PackedBoxGrid& vertexGrid, const detail::PackedBoxGri
 
 /// The broad phase of one step from scratch: every vertex-face and edge-edge pair whose swept
 /// boxes (the face's grown by eta, the edges' by eta / 2 each) overlap and that is within reach.
-/// The pairs of boxes come from pairing the grids cell by cell (PackedBoxGrid::pairs), not from
+/// The pairs of boxes come from pairing the grids cell by cell (PackedBoxGrid::pairsAcross and
+/// pairsWithin), not from
 /// a query per vertex and per edge (each cell's entries scanned by every query meeting it).
 /// Phantom 100^3, one thread: the edge-edge pairs of its 22 steps from scratch in 9.5 ms instead
 /// of 15.9, the collision-safe steps in 415 M instructions instead of 518 M (with the same
@@ -945,7 +943,7 @@ void SafeStepCache::Impl::collect(const Mesh& mesh, const StepGeometry& g, std::
 {
     // Clean against clean: nothing to test (see rebuild). The rest from grids of this step's
     // dirty primitives, in the anchored grids' frame, paired with the anchored grids and with
-    // each other (PackedBoxGrid::pairsSparse, a grid query per dirty primitive before: phantom
+    // each other (PackedBoxGrid::pairsAcross, a grid query per dirty primitive before: phantom
     // 100^3, collect 113.5 M -> 81.6 M instructions), and from queries of the overlay.
     // f(k, element) for the pairs of the sparse grid's item k and an anchored element still in
     // the anchored grid (not anchored again since).
@@ -956,7 +954,7 @@ void SafeStepCache::Impl::collect(const Mesh& mesh, const StepGeometry& g, std::
             if (!moved[std::size_t(x)]) f(k, x, found);
         };
         pairInChunks(sparse.entries(), lists, candidates, [&](std::size_t e0, std::size_t e1, std::vector<Quad>& found) {
-            detail::PackedBoxGrid::pairsSparse(sparse, anchored, e0, e1, [&](int k, int item) { pair(k, item, found); });
+            detail::PackedBoxGrid::pairsAcross(sparse, anchored, e0, e1, [&](int k, int item) { pair(k, item, found); });
         });
         detail::PackedBoxGrid::pairsWithLarge(sparse, anchored, [&](int k, int item) { pair(k, item, candidates); });
     };
@@ -982,19 +980,17 @@ void SafeStepCache::Impl::collect(const Mesh& mesh, const StepGeometry& g, std::
     };
     dirtyBox.clear();
     for (int i : dirtyV) dirtyBox.push_back(g.vertexBox(i));
-    dirtyVertexGrid.buildSparse(dirtyBox, frame, faceGrid.buckets());
+    dirtyVertexGrid.buildSparse(dirtyBox, frame);
     dirtyBox.clear();
     for (int f : dirtyF) dirtyBox.push_back(faceBox[std::size_t(f)]);
-    dirtyGrid.buildSparse(dirtyBox, frame, faceGrid.buckets());
+    dirtyGrid.buildSparse(dirtyBox, frame);
     withAnchored(dirtyVertexGrid, faceGrid, faceOf, movedF, dirtyWithClean);
     pairInChunks(dirtyVertexGrid.entries(), lists, candidates, [&](std::size_t e0, std::size_t e1, std::vector<Quad>& found) {
-        detail::PackedBoxGrid::pairsSparse(dirtyVertexGrid, dirtyGrid, e0, e1,
+        detail::PackedBoxGrid::pairsAcross(dirtyVertexGrid, dirtyGrid, e0, e1,
                                            [&](int k, int j) { dirtyWithDirty(k, j, found); });
     });
     detail::PackedBoxGrid::pairsWithLarge(dirtyVertexGrid, dirtyGrid,
                                           [&](int k, int j) { dirtyWithDirty(k, j, candidates); });
-    if (vertexGrid.buckets() != faceGrid.buckets()) // (rare: then with the vertices' bucket count)
-        dirtyGrid.buildSparse(dirtyBox, frame, vertexGrid.buckets());
     withAnchored(dirtyGrid, vertexGrid, vertexOf, movedV, cleanWithDirty);
     findInChunks(dirtyV.size(), lists, candidates, [&](std::size_t k, std::vector<Quad>& found) {
         overFaceGrid.query(g.vertexBox(dirtyV[k]), [&](int f) { dirtyWithClean(int(k), f, found); });
@@ -1022,10 +1018,10 @@ void SafeStepCache::Impl::collect(const Mesh& mesh, const StepGeometry& g, std::
     };
     dirtyBox.clear();
     for (int e : dirtyE) dirtyBox.push_back(edgeBox[std::size_t(e)]);
-    dirtyGrid.buildSparse(dirtyBox, frame, edgeGrid.buckets());
+    dirtyGrid.buildSparse(dirtyBox, frame);
     withAnchored(dirtyGrid, edgeGrid, edgeOf, movedE, withClean);
     pairInChunks(dirtyGrid.entries(), lists, candidates, [&](std::size_t e0, std::size_t e1, std::vector<Quad>& found) {
-        dirtyGrid.pairsFromEntries(e0, e1, [&](int k, int j) { withDirty(k, j, found); });
+        dirtyGrid.pairsWithin(e0, e1, [&](int k, int j) { withDirty(k, j, found); });
     });
     dirtyGrid.pairsWithLarge([&](int k, int j) { withDirty(k, j, candidates); });
     findInChunks(dirtyE.size(), lists, candidates, [&](std::size_t k, std::vector<Quad>& found) {

@@ -358,13 +358,13 @@ private:
 /// along z are consecutive buckets and their entries one run of memory, scanned without branches
 /// (an entry carries its key and its item's box, in floats rounded outward). Reports every item
 /// whose box overlaps the query, once (the float boxes are a little larger than the given ones: a
-/// few more reports, never fewer). Two grids built in one frame are also paired cell by cell
-/// (pairs(): every two overlapping items, without a query per item). Buffers are kept between
-/// builds.
+/// few more reports, never fewer). Grids built in one frame are also paired cell by cell
+/// (pairsAcross, pairsWithin: every two overlapping items, without a query per item). Buffers are
+/// kept between builds.
 class PackedBoxGrid {
 public:
     /// Where a grid's cells are: their side's inverse and the origin (in cells). Grids built in
-    /// the same frame can be paired (pairs()).
+    /// the same frame can be paired (pairsAcross()).
     struct Frame {
         double invCell = 1.0;
         std::array<double, 3> origin = {0, 0, 0};
@@ -397,9 +397,8 @@ public:
     /// Items 0..boxes.size()-1 with those boxes; cells of side cellSize > 0 (see frameFor).
     void build(const std::vector<Box6>& boxes, double cellSize) { build(boxes, frameFor({&boxes}, cellSize)); }
 
-    /// The same in a given frame (the boxes within it: see frameFor), with at least minBuckets
-    /// buckets (a power of two; pairs() walks the buckets of two grids together).
-    void build(const std::vector<Box6>& boxes, const Frame& frame, std::size_t minBuckets = 0)
+    /// The same in a given frame (the boxes within it: see frameFor).
+    void build(const std::vector<Box6>& boxes, const Frame& frame)
     {
         mLarge.clear();
         mEntries.clear();
@@ -417,9 +416,7 @@ public:
             }
             entries += std::size_t(it.span[0] + 1) * std::size_t(it.span[1] + 1) * std::size_t(it.span[2] + 1);
         }
-        // At least 2 kMaxSpan buckets: a query's run of cells never meets itself after wrapping.
-        std::size_t buckets = 256;
-        while ((buckets < entries || buckets < minBuckets) && buckets < (std::size_t(1) << 26)) buckets *= 2;
+        const std::size_t buckets = bucketCount(entries);
         mMask = buckets - 1;
         mSparse = false;
         mStart.assign(buckets + 1, 0);
@@ -437,18 +434,16 @@ public:
         }
     }
 
-    /// A grid of few boxes (a step's dirty primitives) in a given frame, with `buckets` buckets
-    /// (those of the grid it is paired with, pairsSparse): its entries sorted by bucket, without
-    /// a table of the buckets (which would cost as much as the grid it is paired with). Only
-    /// paired (pairsSparse, pairsFromEntries, pairsWithLarge), not queried.
-    void buildSparse(const std::vector<Box6>& boxes, const Frame& frame, std::size_t buckets)
+    /// A grid of few boxes (a step's dirty primitives) in a given frame: its entries sorted by
+    /// bucket, without a table of the buckets. Only paired (pairsAcross, pairsWithin,
+    /// pairsWithLarge), not queried.
+    void buildSparse(const std::vector<Box6>& boxes, const Frame& frame)
     {
         mLarge.clear();
         mEntries.clear();
         mStart.clear();
         mInvCell = frame.invCell;
         mOrigin = frame.origin;
-        mMask = buckets - 1;
         mSparse = true;
         mItems.resize(boxes.size());
         for (std::size_t i = 0; i < boxes.size(); ++i) {
@@ -461,6 +456,7 @@ public:
                 mEntries.push_back(Entry{key, std::int32_t(i), it.box, lowest});
             });
         }
+        mMask = bucketCount(mEntries.size()) - 1;
         // By bucket, in the order made within one (sorting (bucket, position) keys).
         mOrder.resize(mEntries.size());
         for (std::size_t i = 0; i < mEntries.size(); ++i)
@@ -471,69 +467,41 @@ public:
         mEntries.swap(mSorted);
     }
 
-    /// The bucket count (a power of two, see pairs()).
-    std::size_t buckets() const { return mMask + 1; }
-
-    /// Calls f(a, b) once for every item a of `first` and item b of `second` (grids built in the
-    /// same frame) whose boxes overlap, but for the large ones (too large for the cells, or not
-    /// finite: pairsWithLarge): in the cell of the
-    /// lower corner of the boxes' intersection, found in the buckets [b0, b1) of the grid with
-    /// more buckets (the other's bucket counts divide it: a key's bucket in it, masked). Both
-    /// grids' entries of a cell are met in a bucket of each, and only there: one pass over the
-    /// buckets instead of a query per item (the broad phase of a step from scratch, ccd.cpp).
+    /// Calls f(a, b) once for every item a of `first`, from its entries [e0, e1), and item b of
+    /// `second` (built in the same frame, either way) whose boxes overlap, but for the large ones
+    /// (too large for the cells, or not finite: pairsWithLarge): each entry of `first` against
+    /// its cell in `second`, reported in the cell of the lower corner of the boxes' intersection
+    /// only. A pass over first's entries instead of a query per item (each cell scanned once per
+    /// entry of `first` in it, not once per query meeting it).
     template <class F>
-    static void pairs(const PackedBoxGrid& first, const PackedBoxGrid& second, std::size_t b0, std::size_t b1, F&& f)
-    {
-        const bool firstMore = first.mMask >= second.mMask;
-        const PackedBoxGrid& more = firstMore ? first : second;
-        const PackedBoxGrid& fewer = firstMore ? second : first;
-        for (std::size_t b = b0; b < b1; ++b) {
-            const std::uint32_t m0 = more.mStart[b], m1 = more.mStart[b + 1];
-            if (m0 == m1) continue;
-            const std::size_t c = b & fewer.mMask;
-            const std::uint32_t f0 = fewer.mStart[c], f1 = fewer.mStart[c + 1];
-            if (f0 == f1) continue;
-            for (std::uint32_t i = m0; i < m1; ++i) {
-                const Entry& x = more.mEntries[i];
-                for (std::uint32_t j = f0; j < f1; ++j) {
-                    const Entry& y = fewer.mEntries[j];
-                    if (x.key == y.key && meet(x, y)) firstMore ? f(int(x.item), int(y.item)) : f(int(y.item), int(x.item));
-                }
-            }
-        }
-    }
-
-    /// The same for a grid `sparse` with few entries (a step's dirty primitives) and one with as
-    /// many buckets (the anchored ones, or another sparse one): each entry of sparse's [e0, e1)
-    /// against its bucket in `dense` (rather than a walk over every bucket). f(sparse item, dense
-    /// item).
-    template <class F>
-    static void pairsSparse(const PackedBoxGrid& sparse, const PackedBoxGrid& dense, std::size_t e0, std::size_t e1,
+    static void pairsAcross(const PackedBoxGrid& first, const PackedBoxGrid& second, std::size_t e0, std::size_t e1,
                             F&& f)
     {
         for (std::size_t i = e0; i < e1; ++i) {
-            const Entry& x = sparse.mEntries[i];
-            const std::size_t b = dense.bucketOf(x.key);
+            const Entry& x = first.mEntries[i];
+            const std::size_t b = second.bucketOf(x.key);
             std::size_t j = 0, end = 0;
-            if (!dense.mSparse) {
-                j = dense.mStart[b], end = dense.mStart[b + 1];
-            } else { // (two sparse grids: the other's run of that bucket)
-                const auto& d = dense.mEntries;
+            if (!second.mSparse) {
+                j = second.mStart[b], end = second.mStart[b + 1];
+            } else { // (no bucket table: the run of that bucket)
+                const auto& d = second.mEntries;
                 j = std::size_t(std::lower_bound(d.begin(), d.end(), b, [&](const Entry& y, std::size_t bucket) {
-                                    return dense.bucketOf(y.key) < bucket;
+                                    return second.bucketOf(y.key) < bucket;
                                 }) - d.begin());
-                for (end = j; end < d.size() && dense.bucketOf(d[end].key) == b;) ++end;
+                for (end = j; end < d.size() && second.bucketOf(d[end].key) == b;) ++end;
             }
             for (; j < end; ++j) {
-                const Entry& y = dense.mEntries[j];
+                const Entry& y = second.mEntries[j];
                 if (x.key == y.key && meet(x, y)) f(int(x.item), int(y.item));
             }
         }
     }
-    /// Within one grid with few entries: f(a, b), a < b, for every two items whose boxes overlap
-    /// (as pairs()), each of the entries [e0, e1) against the later ones of its bucket.
+    /// Within one grid: f(a, b), a < b, once for every two items whose boxes overlap (but for
+    /// the large ones, as above), each of the entries [e0, e1) against the later ones of its
+    /// bucket (a bucket's entries are in item order: the builds keep the order they were made
+    /// in; an item's entries in one bucket are of different cells).
     template <class F>
-    void pairsFromEntries(std::size_t e0, std::size_t e1, F&& f) const
+    void pairsWithin(std::size_t e0, std::size_t e1, F&& f) const
     {
         for (std::size_t i = e0; i < e1; ++i) {
             const Entry& x = mEntries[i];
@@ -546,29 +514,10 @@ public:
             }
         }
     }
-    /// Entries of the grid (for the ranges of pairsSparse and pairsFromEntries).
+    /// Entries of the grid (for the ranges of pairsAcross and pairsWithin).
     std::size_t entries() const { return mEntries.size(); }
 
-    /// Within one grid: f(a, b), a < b, once for every two items whose boxes overlap, but for the
-    /// large ones (as above), from the buckets [b0, b1).
-    template <class F>
-    void pairs(std::size_t b0, std::size_t b1, F&& f) const
-    {
-        for (std::size_t b = b0; b < b1; ++b) {
-            const std::uint32_t s = mStart[b], e = mStart[b + 1];
-            // (a bucket's entries are in item order: the build sorts them stably; an item's
-            // entries in one bucket are of different cells)
-            for (std::uint32_t i = s; i + 1 < e; ++i) {
-                const Entry& x = mEntries[i];
-                for (std::uint32_t j = i + 1; j < e; ++j) {
-                    const Entry& y = mEntries[j];
-                    if (x.key == y.key && meet(x, y)) f(int(x.item), int(y.item));
-                }
-            }
-        }
-    }
-
-    /// The pairs pairs() leaves out, those with a large item (rare: a vertex flung far, a huge
+    /// The pairs pairsAcross() and pairsWithin() leave out, those with a large item (rare: a vertex flung far, a huge
     /// face), from a pass over the other grid's items: f(a, b) once for every item a of
     /// `first` and b of `second` whose boxes overlap, one of them large.
     template <class F>
@@ -663,6 +612,14 @@ private:
     static constexpr std::int64_t kCoordMask = (std::int64_t(1) << 21) - 1;
     static constexpr std::int64_t kMargin = std::int64_t(1) << 19; ///< cells below a frame's boxes (frameFor)
     static constexpr double kHuge = 1e30;
+    /// A power of two of at least `entries` buckets, and at least 2 kMaxSpan: a query's run of
+    /// cells never meets itself after wrapping.
+    static std::size_t bucketCount(std::size_t entries)
+    {
+        std::size_t buckets = 256;
+        while (buckets < entries && buckets < (std::size_t(1) << 26)) buckets *= 2;
+        return buckets;
+    }
     /// x rounded to a float toward -infinity (up: toward +infinity); the float neighbour is
     /// taken on the bits (std::nextafter is a library call, and this runs six times a query).
     static float down(double x)
