@@ -11,6 +11,7 @@
 #include <tbb/blocked_range.h>
 #include <tbb/global_control.h>
 #include <tbb/parallel_for.h>
+#include <tbb/task_group.h>
 #endif
 
 namespace riemesh {
@@ -78,6 +79,54 @@ void parallelForChunks(std::size_t begin, std::size_t end, std::size_t grain,
     }
 #endif
     fn(begin, end);
+}
+
+struct Background::Impl {
+#ifdef RIEMESH_CORE_TBB
+    tbb::task_group group;
+#endif
+    bool running = false;
+};
+
+Background::Background() : mImpl(std::make_unique<Impl>()) {}
+
+Background::~Background()
+{
+    try {
+        wait();
+    } catch (...) { // (a job that threw, never waited for: nothing to report it to)
+    }
+}
+
+bool Background::concurrent() const
+{
+#ifdef RIEMESH_CORE_TBB
+    return threadCount() > 1;
+#else
+    return false;
+#endif
+}
+
+void Background::run(std::function<void()> fn)
+{
+    wait();
+#ifdef RIEMESH_CORE_TBB
+    if (concurrent()) {
+        mImpl->running = true;
+        mImpl->group.run(std::move(fn));
+        return;
+    }
+#endif
+    fn();
+}
+
+void Background::wait()
+{
+    if (!mImpl->running) return;
+    mImpl->running = false;
+#ifdef RIEMESH_CORE_TBB
+    mImpl->group.wait();
+#endif
 }
 
 } // namespace detail

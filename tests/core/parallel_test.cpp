@@ -219,6 +219,26 @@ TEST_CASE("parallel: a box pinching apart onto two balls gives the same meshes o
     CHECK(cuts(o) >= 1);
 }
 
+TEST_CASE("parallel: the intersection-free evolution gives the same meshes on 1 and 2 threads")
+{
+    // On 2 threads the collision-safe step measures the pairs of the vertices it anchors again
+    // while the regularity step edits the mesh (SafeStepCache); on 1 it does so before. Two
+    // bubbles merging inside a ball, and a box pinching apart onto two balls: merges, cuts and
+    // the garbage collections after them while a measurement may be under way.
+    EvolutionOptions options = baseOptions(0.8);
+    options.intersectionFree = true;
+    const auto ball = fogImage([](const Vec3& x) { return ballSdf(x, Vec3::Zero(), 9); },
+                               Box3(Vec3::Constant(-12), Vec3::Constant(12)));
+    const Outcome merged = checkSameForOneAndTwoThreads(makeBubbles({{Vec3(-4, 0, 0), 2.0}, {Vec3(4, 0, 0), 2.0}}, 1.2),
+                                                        ball, EuclideanMetric(), options);
+    CHECK(merges(merged) >= 1);
+    const auto balls = fogImage(
+        [](const Vec3& x) { return std::max(ballSdf(x, Vec3(-7, 0, 0), 5), ballSdf(x, Vec3(7, 0, 0), 5)); },
+        Box3(Vec3(-15, -8, -8), Vec3(15, 8, 8)));
+    const Outcome cut = checkSameForOneAndTwoThreads(makeInitialBox(balls, 1.6), balls, EuclideanMetric(), options);
+    CHECK(cuts(cut) >= 1);
+}
+
 TEST_CASE("parallel: a dumbbell whose tube is cut gives the same meshes on 1 and 2 threads")
 {
     // The dumbbell fixture (two spheres of radius 4, 3 apart, a thin tube between them) on an

@@ -102,8 +102,11 @@ struct SafeStepStats {
 /// allowed drift of every corner of a pair closer than C lowered to match): a vertex that moved,
 /// or whose faces an edit changed, is searched for a step or two instead of until the next
 /// rebuild (phantom 100^3: faces and edges searched per step while the tube fills the cavity
-/// 1,000-2,100 before, 450-650 now; at rest up to 2,100 before, 60-230 now).
-/// Deterministic for a given sequence of steps.
+/// 1,000-2,100 before, 450-650 now; at rest up to 2,100 before, 60-230 now). Their pairs are
+/// measured beside the rest of the iteration, on another thread when the core's loops may use
+/// more than one (the regularity step that follows is mostly sequential); the next step, and
+/// every other use of the cache, waits for them first.
+/// Deterministic for a given sequence of steps (the same for any thread count).
 /// Call invalidate() when the mesh is renumbered (garbage collection, reordering) or replaced;
 /// a mesh that lost elements is noticed and anchored again.
 class SafeStepCache {

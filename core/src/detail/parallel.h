@@ -8,6 +8,7 @@
 
 #include <cstddef>
 #include <functional>
+#include <memory>
 
 namespace riemesh::detail {
 
@@ -34,5 +35,25 @@ void forLive(const MeshT& mesh, std::size_t count, std::size_t grain, Fn&& fn)
         if (!mesh.status(Handle(int(i))).deleted()) fn(i);
     });
 }
+
+/// One job at a time run beside the caller: run(fn) starts fn on another thread when the core's
+/// loops may use more than one (threadCount() > 1) and returns, else runs it at once; wait()
+/// returns once it has finished (and rethrows what it threw). The job must touch nothing the
+/// caller uses until wait(). The destructor waits.
+class Background {
+public:
+    Background();
+    ~Background();
+    Background(const Background&) = delete;
+    Background& operator=(const Background&) = delete;
+    void run(std::function<void()> fn);
+    void wait();
+    /// run() would start its job on another thread.
+    bool concurrent() const;
+
+private:
+    struct Impl;
+    std::unique_ptr<Impl> mImpl;
+};
 
 } // namespace riemesh::detail
