@@ -4,7 +4,10 @@
 // regularity measurements, collision candidates) on TBB; built without TBB (WebAssembly) they run
 // on the calling thread. Either way the result is the same for any thread count, bit for bit: a
 // parallel loop only writes its own elements' outputs, sums are taken in index order, and every
-// mesh edit stays sequential.
+// mesh edit stays sequential. One job runs beside the iteration instead of in it when there are
+// several threads: the intersection-free step's measurement of the clearances it renews
+// (SafeStepCache in riemesh/ccd.h), which reads only what it noted before and is waited for
+// before its results are used.
 #pragma once
 
 namespace riemesh {
