@@ -70,16 +70,20 @@ std::array<int, 3> faceIds(const Mesh& mesh, FaceHandle f)
             mesh.to_vertex_handle(mesh.next_halfedge_handle(h)).idx()};
 }
 
+/// The vertex indices of edge e, from and to its first halfedge.
+std::array<int, 2> edgeIds(const Mesh& mesh, EdgeHandle e)
+{
+    const HalfedgeHandle h = mesh.halfedge_handle(e, 0);
+    return {mesh.from_vertex_handle(h).idx(), mesh.to_vertex_handle(h).idx()};
+}
+
 /// The vertex indices of every live face and edge, in index order.
 void collectPrimitives(const Mesh& mesh, std::vector<std::array<int, 3>>& faces, std::vector<std::array<int, 2>>& edges)
 {
     faces.clear();
     for (auto f : mesh.faces()) faces.push_back(faceIds(mesh, f));
     edges.clear();
-    for (auto e : mesh.edges()) {
-        const HalfedgeHandle h = mesh.halfedge_handle(e, 0);
-        edges.push_back({mesh.from_vertex_handle(h).idx(), mesh.to_vertex_handle(h).idx()});
-    }
+    for (auto e : mesh.edges()) edges.push_back(edgeIds(mesh, e));
 }
 
 /// Queries per chunk of the broad phase (see findInChunks). Small: a cached step queries a few
@@ -345,8 +349,8 @@ void pairAll(const detail::PackedBoxGrid& vertexGrid, const detail::PackedBoxGri
 /// The broad phase of one step from scratch: every vertex-face and edge-edge pair whose swept
 /// boxes (the face's grown by eta, the edges' by eta / 2 each) overlap and that is within reach.
 /// The pairs of boxes come from pairing the grids cell by cell (PackedBoxGrid::pairsAcross and
-/// pairsWithin), not from
-/// a query per vertex and per edge (each cell's entries scanned by every query meeting it).
+/// pairsWithin), not from a query per vertex and per edge (each cell's entries scanned by every
+/// query meeting it).
 /// Phantom 100^3, one thread: the edge-edge pairs of its 22 steps from scratch in 9.5 ms instead
 /// of 15.9, the collision-safe steps in 415 M instructions instead of 518 M (with the same
 /// pairing at the anchorings, SafeStepCache::Impl::rebuild).
@@ -597,10 +601,7 @@ void SafeStepCache::Impl::anchorHere(Mesh& mesh, const StepGeometry& g, const Sa
         faceBox[i] = g.faceBox(faceNow[i]);
     });
     edgeNow.assign(mesh.n_edges(), {-1, -1});
-    forLive<EdgeHandle>(mesh, mesh.n_edges(), [&](std::size_t i) {
-        const HalfedgeHandle h = mesh.halfedge_handle(EdgeHandle(int(i)), 0);
-        edgeNow[i] = {mesh.from_vertex_handle(h).idx(), mesh.to_vertex_handle(h).idx()};
-    });
+    forLive<EdgeHandle>(mesh, mesh.n_edges(), [&](std::size_t i) { edgeNow[i] = edgeIds(mesh, EdgeHandle(int(i))); });
     std::size_t liveFaces = 0;
     double extent = 0;
     for (std::size_t i = 0; i < faceNow.size(); ++i)
@@ -777,10 +778,7 @@ void SafeStepCache::Impl::noteStars(const Mesh& mesh)
         for (auto f = mesh.cvf_begin(v); f.is_valid(); ++f) starFaces.push_back({f->idx(), faceIds(mesh, *f)});
         star.f1 = starFaces.size();
         star.e0 = starEdges.size();
-        for (auto e = mesh.cve_begin(v); e.is_valid(); ++e) {
-            const HalfedgeHandle h = mesh.halfedge_handle(*e, 0);
-            starEdges.push_back({e->idx(), {mesh.from_vertex_handle(h).idx(), mesh.to_vertex_handle(h).idx()}});
-        }
+        for (auto e = mesh.cve_begin(v); e.is_valid(); ++e) starEdges.push_back({e->idx(), edgeIds(mesh, *e)});
         star.e1 = starEdges.size();
         stars.push_back(star);
     }
@@ -893,14 +891,9 @@ void SafeStepCache::Impl::measureAgain(const Mesh* mesh)
     // drift is the same).
     const double C = radius, C2 = C * C;
     // Deleted elements: from the mesh, or from the notes taken before the iteration went on.
-    auto deadVertex = [&](int x) {
-        return mesh ? mesh->status(VertexHandle(x)).deleted() : std::size_t(x) < deadV.size() && deadV[std::size_t(x)];
-    };
-    auto deadFace = [&](int x) {
-        return mesh ? mesh->status(FaceHandle(x)).deleted() : std::size_t(x) < deadF.size() && deadF[std::size_t(x)];
-    };
-    auto deadEdge = [&](int x) {
-        return mesh ? mesh->status(EdgeHandle(x)).deleted() : std::size_t(x) < deadE.size() && deadE[std::size_t(x)];
+    auto dead = [&](auto handle, const std::vector<char>& noted) {
+        const std::size_t x = std::size_t(handle.idx());
+        return mesh ? mesh->status(handle).deleted() : x < noted.size() && noted[x];
     };
     near.clear();
     findInChunks(settleV.size(), nearLists, near, [&](std::size_t k, std::vector<Near>& found) {
@@ -908,7 +901,7 @@ void SafeStepCache::Impl::measureAgain(const Mesh* mesh)
         const Vec3& p = anchor[std::size_t(i)];
         queryFaces(anchoredBox(&i, 1, std::max(0.0, 0.5 * C - eta)), [&](int f) {
             const auto& t = faceAt0[std::size_t(f)];
-            if (t[0] < 0 || hasCorner(t, i) || deadFace(f)) return;
+            if (t[0] < 0 || hasCorner(t, i) || dead(FaceHandle(f), deadF)) return;
             const double d2 = pointTriangleDistanceSquared(p, anchor[std::size_t(t[0])], anchor[std::size_t(t[1])],
                                                            anchor[std::size_t(t[2])]);
             if (d2 < C2) found.push_back({{i, t[0], t[1], t[2]}, std::sqrt(d2)});
@@ -917,7 +910,7 @@ void SafeStepCache::Impl::measureAgain(const Mesh* mesh)
     findInChunks(settleF.size(), nearLists, near, [&](std::size_t k, std::vector<Near>& found) {
         const auto& t = faceAt0[std::size_t(settleF[k])];
         queryVertices(anchoredBox(t.data(), 3, 0.5 * C), [&](int i) {
-            if (hasCorner(t, i) || !anchored[std::size_t(i)] || deadVertex(i)) return;
+            if (hasCorner(t, i) || !anchored[std::size_t(i)] || dead(VertexHandle(i), deadV)) return;
             const double d2 = pointTriangleDistanceSquared(anchor[std::size_t(i)], anchor[std::size_t(t[0])],
                                                            anchor[std::size_t(t[1])], anchor[std::size_t(t[2])]);
             if (d2 < C2) found.push_back({{i, t[0], t[1], t[2]}, std::sqrt(d2)});
@@ -927,7 +920,7 @@ void SafeStepCache::Impl::measureAgain(const Mesh* mesh)
         const auto& x = edgeAt0[std::size_t(settleE[k])];
         queryEdges(anchoredBox(x.data(), 2, std::max(0.0, 0.5 * C - 0.5 * eta)), [&](int h) {
             const auto& y = edgeAt0[std::size_t(h)];
-            if (y[0] < 0 || shareVertex(x, y) || deadEdge(h)) return;
+            if (y[0] < 0 || shareVertex(x, y) || dead(EdgeHandle(h), deadE)) return;
             const double d2 = segmentSegmentDistanceSquared(anchor[std::size_t(x[0])], anchor[std::size_t(x[1])],
                                                             anchor[std::size_t(y[0])], anchor[std::size_t(y[1])]);
             if (d2 < C2) found.push_back({{x[0], x[1], y[0], y[1]}, std::sqrt(d2)});
@@ -1003,8 +996,7 @@ void SafeStepCache::Impl::classify(const Mesh& mesh, const StepGeometry& g)
         const std::size_t e = std::size_t(eh.idx());
         if (seenE[e] == stamp || mesh.status(eh).deleted()) return;
         seenE[e] = stamp;
-        const HalfedgeHandle h = mesh.halfedge_handle(eh, 0);
-        const std::array<int, 2> x = {mesh.from_vertex_handle(h).idx(), mesh.to_vertex_handle(h).idx()};
+        const std::array<int, 2> x = edgeIds(mesh, eh);
         if (e < edgeAt0.size() && edgeAt0[e][0] >= 0) {
             if (x == edgeAt0[e]) {
                 if (clean(x.data(), 2)) return;

@@ -517,9 +517,9 @@ public:
     /// Entries of the grid (for the ranges of pairsAcross and pairsWithin).
     std::size_t entries() const { return mEntries.size(); }
 
-    /// The pairs pairsAcross() and pairsWithin() leave out, those with a large item (rare: a vertex flung far, a huge
-    /// face), from a pass over the other grid's items: f(a, b) once for every item a of
-    /// `first` and b of `second` whose boxes overlap, one of them large.
+    /// The pairs pairsAcross() and pairsWithin() leave out, those with a large item (rare: a
+    /// vertex flung far, a huge face), from a pass over the other grid's items: f(a, b) once for
+    /// every item a of `first` and b of `second` whose boxes overlap, one of them large.
     template <class F>
     static void pairsWithLarge(const PackedBoxGrid& first, const PackedBoxGrid& second, F&& f)
     {
