@@ -82,13 +82,17 @@ bool shorterFirst(const QueuedEdge& x, const QueuedEdge& y) { return x.priority 
 
 class Regularizer {
 public:
+    /// With `made` (options.intersectionFree, the edits made without asking the guard, see
+    /// enforceRegularity): the vertices whose faces the collapses and flips made or moved are
+    /// noted there, each once.
     Regularizer(Mesh& mesh, const MetricField& metric, const RegularityOptions& options, RegularityStats& stats,
-                detail::GuardGrid* kept)
+                detail::GuardGrid* kept, std::vector<int>* made = nullptr)
         : mMesh(mesh), mMetric(metric), mVertexMetrics(mesh, metric), mStats(stats), mLo(options.delta),
-          mHi(options.zeta * options.delta)
+          mHi(options.zeta * options.delta), mMade(made)
     {
-        if (options.intersectionFree)
+        if (options.intersectionFree && !made)
             mGuard = std::make_unique<detail::IntersectionGuard>(mesh, options.minSeparation, kept);
+        if (mMade) mMade->clear();
         mSpeculate = options.speculate;
     }
 
@@ -244,6 +248,26 @@ public:
         mTouchedList.push_back(int(i));
     }
 
+    /// Notes v among the vertices whose faces the edits made (see the constructor). A face made or
+    /// moved by a collapse or a flip has a noted corner (the kept vertex; a corner of both new
+    /// faces), and keeps one through later edits: a collapse notes the vertex its faces now end at,
+    /// and a split of an edge of such a face notes the new vertex, a corner of both halves (the
+    /// halves of any other face lie in it, which the edits did not make).
+    void noteMade(VertexHandle v)
+    {
+        if (!mMade) return;
+        const std::size_t i = std::size_t(v.idx());
+        if (i >= mIsMade.size()) mIsMade.resize(std::max(i + 1, std::size_t(mMesh.n_vertices())), 0);
+        if (mIsMade[i]) return;
+        mIsMade[i] = 1;
+        mMade->push_back(v.idx());
+    }
+    bool isMade(VertexHandle v) const
+    {
+        const std::size_t i = std::size_t(v.idx());
+        return i < mIsMade.size() && mIsMade[i];
+    }
+
     void clearTouched()
     {
         for (const int i : mTouchedList) mTouched[std::size_t(i)] = 0;
@@ -294,9 +318,14 @@ public:
             const Vec3 mid = 0.5 * (position(mMesh, mMesh.from_vertex_handle(h)) +
                                     position(mMesh, mMesh.to_vertex_handle(h)));
             if (!splitKeepsFacesValid(h, mid)) continue; // stays long: counted in tooLong
+            const bool inMade = mMade && (isMade(mMesh.from_vertex_handle(h)) || isMade(mMesh.to_vertex_handle(h)) ||
+                                          isMade(mMesh.to_vertex_handle(mMesh.next_halfedge_handle(h))) ||
+                                          isMade(mMesh.to_vertex_handle(mMesh.next_halfedge_handle(
+                                              mMesh.opposite_halfedge_handle(h)))));
             const VertexHandle w = split(mMesh, e, mid);
             if (!w.is_valid()) continue;
             ++splits;
+            if (inMade) noteMade(w);
             updateRing(w);
             for (auto oh = mMesh.cvoh_begin(w); oh.is_valid(); ++oh) {
                 const EdgeHandle ne = mMesh.edge_handle(*oh);
@@ -424,6 +453,7 @@ public:
         const VertexHandle b = mMesh.to_vertex_handle(mMesh.next_halfedge_handle(o));
         detail::flipUnchecked(mMesh, e);
         if (mGuard) mGuard->update(a);
+        noteMade(a); // (a corner of both new faces)
         --mValence[u.idx()];
         --mValence[v.idx()];
         ++mValence[a.idx()];
@@ -569,6 +599,7 @@ private:
     {
         const VertexHandle kept = detail::collapseUnchecked(mMesh, hh, target);
         ++mCollapses;
+        noteMade(kept);
         updateRing(kept);
         for (auto oh = mMesh.cvoh_begin(kept); oh.is_valid(); ++oh) {
             const EdgeHandle ne = mMesh.edge_handle(*oh);
@@ -749,28 +780,38 @@ private:
     std::vector<char> mCollapseMarks;
     std::vector<int> mSpeculated;
     bool mSpeculate = true;
-    std::unique_ptr<detail::IntersectionGuard> mGuard; ///< options.intersectionFree
+    std::unique_ptr<detail::IntersectionGuard> mGuard; ///< options.intersectionFree, edits asked in turn
+    std::vector<int>* mMade = nullptr;                 ///< (see the constructor)
+    std::vector<char> mIsMade;                         ///< by vertex idx(): in mMade
 };
 
 } // namespace
 
 struct RegularityCache::Impl {
     detail::GuardGrid guard;
+    Mesh before;            ///< (checkEditsTogether's copy of the mesh, kept for its buffers)
+    std::size_t lastEdits = std::size_t(-1); ///< the collapses and flips of the last call (none yet: many)
 };
 
 RegularityCache::RegularityCache() : mImpl(std::make_unique<Impl>()) {}
 RegularityCache::~RegularityCache() = default;
 RegularityCache::RegularityCache(RegularityCache&&) noexcept = default;
 RegularityCache& RegularityCache::operator=(RegularityCache&&) noexcept = default;
-void RegularityCache::invalidate() { mImpl->guard.valid = false; }
-
-RegularityStats enforceRegularity(Mesh& mesh, const MetricField& metric, const RegularityOptions& options,
-                                  RegularityCache* cache)
+void RegularityCache::invalidate()
 {
-    if (!(options.delta > 0.0)) throw std::invalid_argument("enforceRegularity: delta must be > 0");
-    if (!(options.zeta > 1.0)) throw std::invalid_argument("enforceRegularity: zeta must be > 1");
+    mImpl->guard.valid = false;
+    mImpl->lastEdits = std::size_t(-1);
+}
+
+namespace {
+
+/// The split, collapse and flip passes (see enforceRegularity), the collapses and flips asked of
+/// the guard in turn, or, with `made`, made without asking and their vertices noted there.
+RegularityStats regularize(Mesh& mesh, const MetricField& metric, const RegularityOptions& options,
+                           detail::GuardGrid* kept, std::vector<int>* made)
+{
     RegularityStats stats;
-    Regularizer regularizer(mesh, metric, options, stats, cache ? &cache->impl().guard : nullptr);
+    Regularizer regularizer(mesh, metric, options, stats, kept, made);
     for (int pass = 0; pass < options.maxPasses; ++pass) {
         if (pass == 0) regularizer.measure();
         else regularizer.measureTouched();
@@ -794,6 +835,45 @@ RegularityStats enforceRegularity(Mesh& mesh, const MetricField& metric, const R
     }
     std::tie(stats.tooLong, stats.tooShort) = regularizer.countOutside();
     regularizer.pruneTunnels();
+    return stats;
+}
+
+} // namespace
+
+RegularityStats enforceRegularity(Mesh& mesh, const MetricField& metric, const RegularityOptions& options,
+                                  RegularityCache* cache)
+{
+    if (!(options.delta > 0.0)) throw std::invalid_argument("enforceRegularity: delta must be > 0");
+    if (!(options.zeta > 1.0)) throw std::invalid_argument("enforceRegularity: zeta must be > 1");
+    detail::GuardGrid own;
+    detail::GuardGrid* kept = cache ? &cache->impl().guard : &own;
+    if (!options.intersectionFree) return regularize(mesh, metric, options, kept, nullptr);
+    // Together when the last call made many edits (or with no cache): the copy of the mesh costs
+    // about as much as what checking together saves on an edit per 128 vertices (head MRI, 6,600
+    // vertices: the copy 0.19 ms; a guard question about 8 us, an edit checked together 4.5 us on
+    // two threads).
+    std::size_t vertices = 0;
+    for (auto v : mesh.vertices()) (void)v, ++vertices;
+    const bool together = options.checkEditsTogether && (!cache || cache->impl().lastEdits > vertices / 128);
+    if (!together) {
+        RegularityStats stats = regularize(mesh, metric, options, kept, nullptr);
+        if (cache) cache->impl().lastEdits = std::size_t(stats.collapses + stats.flips);
+        return stats;
+    }
+    // The edits made without asking, then the faces they made checked together (in parallel);
+    // if any would cross or come too close, the mesh as it was and the edits made again, each
+    // asked in turn.
+    std::unique_ptr<Mesh> ownBefore;
+    Mesh& before = cache ? cache->impl().before : *(ownBefore = std::make_unique<Mesh>());
+    before = mesh;
+    std::vector<int> made;
+    RegularityStats stats = regularize(mesh, metric, options, kept, &made);
+    const bool clear = detail::IntersectionGuard(mesh, options.minSeparation, kept).facesAroundAreClear(made);
+    if (cache) cache->impl().lastEdits = std::size_t(stats.collapses + stats.flips);
+    if (clear) return stats;
+    mesh = before;
+    stats = regularize(mesh, metric, options, kept, nullptr);
+    stats.editsRedone = true;
     return stats;
 }
 

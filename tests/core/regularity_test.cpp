@@ -5,6 +5,7 @@
 #include "riemesh/edge_ops.h"
 #include "riemesh/primitives.h"
 #include "riemesh/regularity.h"
+#include "riemesh/self_intersection.h"
 
 #include <doctest/doctest.h>
 
@@ -66,6 +67,40 @@ bool sameMesh(const Mesh& a, const Mesh& b)
             if (*fa != *fb) return false;
     }
     return true;
+}
+
+/// A sphere of radius 1 with its faces turned inward (a cavity) inside one of radius 1.02, both
+/// icospheres of level 4: collapses on one cut chords toward the other, which a guard refuses.
+Mesh sphereInSphere()
+{
+    Mesh a;
+    const Mesh inner = makeIcosphere(Vec3(0, 0, 0), 1.0, 4);
+    std::vector<VertexHandle> made;
+    for (auto v : inner.vertices()) made.push_back(a.add_vertex(inner.point(v)));
+    for (auto f : inner.faces()) {
+        std::vector<VertexHandle> corners;
+        for (auto v = inner.cfv_begin(f); v.is_valid(); ++v) corners.push_back(made[std::size_t(v->idx())]);
+        a.add_face(corners[2], corners[1], corners[0]);
+    }
+    appendMesh(a, makeIcosphere(Vec3(0, 0, 0), 1.02, 4));
+    return a;
+}
+
+/// The vertices of meshes[0] (a sphereInSphere, the others copies with the same handles) turned
+/// about z by 0.4 (faces move out of the boxes a guard entered them with) and jittered about
+/// their spheres (which never meet), alike in every mesh.
+void turnAndJitter(std::mt19937& rng, std::initializer_list<Mesh*> meshes)
+{
+    std::normal_distribution<double> noise(0.0, 0.001);
+    const double turn = 0.4, cs = std::cos(turn), sn = std::sin(turn);
+    Mesh& a = **meshes.begin();
+    for (auto v : a.vertices()) {
+        const Vec3 p = position(a, v);
+        const double radius = p.norm() < 1.01 ? 1.0 : 1.02;
+        const Vec3 r(cs * p.x() - sn * p.y(), sn * p.x() + cs * p.y(), p.z());
+        const Vec3 q = r.normalized() * radius + Vec3(noise(rng), noise(rng), noise(rng));
+        for (Mesh* m : meshes) m->set_point(v, toPoint(q));
+    }
 }
 
 std::vector<Vec3> positions(const Mesh& mesh)
@@ -438,21 +473,9 @@ TEST_CASE("regularity: the edit guard's grid kept from call to call makes the sa
     // without, the same vertices and faces at every call. Without the guard the mesh differs: a
     // collapse on the outer sphere cuts a chord toward the inner one, which the guard refuses.
     const EuclideanMetric metric;
-    Mesh a;
-    { // the inner sphere, faces turned inward (a cavity), then the outer one
-        const Mesh inner = makeIcosphere(Vec3(0, 0, 0), 1.0, 4);
-        std::vector<VertexHandle> made;
-        for (auto v : inner.vertices()) made.push_back(a.add_vertex(inner.point(v)));
-        for (auto f : inner.faces()) {
-            std::vector<VertexHandle> corners;
-            for (auto v = inner.cfv_begin(f); v.is_valid(); ++v) corners.push_back(made[std::size_t(v->idx())]);
-            a.add_face(corners[2], corners[1], corners[0]);
-        }
-    }
-    appendMesh(a, makeIcosphere(Vec3(0, 0, 0), 1.02, 4));
+    Mesh a = sphereInSphere();
     Mesh b = a, c = a;
     std::mt19937 rng(2027);
-    std::normal_distribution<double> noise(0.0, 0.001);
     RegularityOptions guarded;
     guarded.delta = 0.05;
     guarded.maxPasses = 2;
@@ -464,18 +487,7 @@ TEST_CASE("regularity: the edit guard's grid kept from call to call makes the sa
     bool guardMattered = false;
     for (int it = 0; it < 40; ++it) {
         guarded.delta = plain.delta = 0.05 + 0.004 * it; // (coarsening: collapses, some across the gap)
-        // Turned about z (faces move out of the boxes they were entered with) and jittered about
-        // their spheres (which never meet).
-        const double turn = 0.4, cs = std::cos(turn), sn = std::sin(turn);
-        for (auto v : a.vertices()) {
-            const Vec3 p = position(a, v);
-            const double radius = p.norm() < 1.01 ? 1.0 : 1.02;
-            const Vec3 r(cs * p.x() - sn * p.y(), sn * p.x() + cs * p.y(), p.z());
-            const Vec3 q = r.normalized() * radius + Vec3(noise(rng), noise(rng), noise(rng));
-            a.set_point(v, toPoint(q));
-            b.set_point(v, toPoint(q));
-            c.set_point(v, toPoint(q)); // (c is a copy of a: the same handles)
-        }
+        turnAndJitter(rng, {&a, &b, &c});
         const auto sa = enforceRegularity(a, metric, guarded, &cache);
         const auto sb = enforceRegularity(b, metric, guarded);
         const auto sc = enforceRegularity(c, metric, plain);
@@ -494,4 +506,47 @@ TEST_CASE("regularity: the edit guard's grid kept from call to call makes the sa
         c = a; // (the unguarded copy starts each call from the guarded mesh)
     }
     CHECK(guardMattered);
+}
+
+TEST_CASE("regularity: edits checked together make the same mesh as checked in turn, or one without crossings")
+{
+    // The guard's two ways on the coarsening sphere in a sphere: the collapses and flips made
+    // without asking and their faces checked at the end (the default), and each asked in turn.
+    // Where the check finds a crossing the call is made again in turn: the same mesh as in turn.
+    // Otherwise the same mesh too, unless an edit the guard refuses in turn was undone by a later
+    // one (never the case here: checked). Either way no two faces cross after a call if none did
+    // before (from delta 0.18 on, the jittered spheres' chords cross each other by themselves).
+    const EuclideanMetric metric;
+    Mesh a = sphereInSphere();
+    Mesh b = a;
+    std::mt19937 rng(2029);
+    RegularityOptions together;
+    together.maxPasses = 2;
+    together.intersectionFree = true;
+    together.minSeparation = 1e-4;
+    RegularityOptions inTurn = together;
+    inTurn.checkEditsTogether = false;
+    int redone = 0, kept = 0;
+    for (int it = 0; it < 40; ++it) {
+        together.delta = inTurn.delta = 0.05 + 0.004 * it;
+        turnAndJitter(rng, {&a, &b});
+        const bool clean = findSelfIntersections(a).count() == 0;
+        const auto sa = enforceRegularity(a, metric, together);
+        const auto sb = enforceRegularity(b, metric, inTurn);
+        CAPTURE(it);
+        REQUIRE_MESH_OK(a);
+        if (clean) {
+            CHECK(findSelfIntersections(a).count() == 0);
+            (sa.editsRedone ? redone : kept) += 1;
+        }
+        CHECK(!sb.editsRedone);
+        CHECK(sa.collapses == sb.collapses);
+        CHECK(sa.flips == sb.flips);
+        CHECK(sameMesh(a, b));
+        if (it % 8 == 7) a.garbage_collection(), b.garbage_collection();
+        b = a;
+    }
+    MESSAGE(redone << " calls made again in turn, " << kept << " kept as made together (of those without a crossing before)");
+    CHECK(redone > 0); // (the guard refuses edits here: the check must find them)
+    CHECK(kept > 0);
 }

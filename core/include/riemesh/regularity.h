@@ -20,6 +20,12 @@ struct RegularityOptions {
     /// With intersectionFree: the new faces of a collapse or flip keep at least this distance
     /// (world units) from the faces they share no vertex with.
     double minSeparation = 0.0;
+    /// With intersectionFree: the collapses and flips are made without asking, and the faces they
+    /// made (or moved) are checked together at the end, in parallel, with the same tests. If any
+    /// would cross a face or come too close, the mesh is put back as it was and the edits made
+    /// again, each checked in turn (RegularityStats::editsRedone). Either way no face of the
+    /// result crosses another; when no edit is refused, the same mesh as checking each in turn.
+    bool checkEditsTogether = true;
     /// Decide the queued collapses' checks in parallel before the collapse pass, which then reuses
     /// each edge's verdict while no collapse has changed what it read. The same mesh either way
     /// (tested); false decides each edge in turn.
@@ -32,6 +38,7 @@ struct RegularityStats {
     int flips = 0;
     int tooShort = 0;  ///< edges still shorter than delta at the end (guards refused the collapse)
     int tooLong = 0;   ///< edges still longer than zeta*delta at the end
+    bool editsRedone = false; ///< checkEditsTogether found a crossing: the edits were made again, each checked
     /// Short edges whose collapse would pinch a tunnel: handed to the topology step.
     std::vector<TunnelCandidate> tunnels;
 };

@@ -6,6 +6,7 @@
 #include "detail/triangle_intersection.h"
 
 #include <algorithm>
+#include <atomic>
 #include <limits>
 
 namespace riemesh::detail {
@@ -100,10 +101,17 @@ void IntersectionGuard::update(VertexHandle v)
     for (auto f = mMesh.cvf_begin(v); f.is_valid(); ++f) enter(*f);
 }
 
-bool IntersectionGuard::crosses(const std::vector<Triangle>& made, const std::array<int, 2>& gone,
-                                const std::array<int, 2>& goneFaces)
+IntersectionGuard::Triangle IntersectionGuard::triangle(FaceHandle f) const
 {
-    if (!mBuilt) build();
+    const HalfedgeHandle h = mMesh.halfedge_handle(f);
+    const VertexHandle a = mMesh.from_vertex_handle(h), b = mMesh.to_vertex_handle(h);
+    const VertexHandle c = mMesh.to_vertex_handle(mMesh.next_halfedge_handle(h));
+    return {{a.idx(), b.idx(), c.idx()}, {position(mMesh, a), position(mMesh, b), position(mMesh, c)}};
+}
+
+template <class Skip>
+bool IntersectionGuard::crosses(const std::vector<Triangle>& made, Scratch& scratch, Skip&& skip) const
+{
     std::vector<TriangleRef> refs;
     refs.reserve(made.size());
     for (const Triangle& t : made) {
@@ -132,7 +140,7 @@ bool IntersectionGuard::crosses(const std::vector<Triangle>& made, const std::ar
     // The faces near any of them, from one query with the box around them all (each face is
     // looked up once, where a query per new triangle met most of them several times), then each
     // against the new triangles whose boxes (grown by the separation) overlap its own.
-    std::vector<Box6>& boxes = mMadeBoxes;
+    std::vector<Box6>& boxes = scratch.boxes;
     boxes.resize(made.size());
     constexpr double inf = std::numeric_limits<double>::infinity();
     Box6 all = {inf, inf, inf, -inf, -inf, -inf};
@@ -145,16 +153,17 @@ bool IntersectionGuard::crosses(const std::vector<Triangle>& made, const std::ar
             all[k + 3] = std::max(all[k + 3], boxes[i][k + 3]);
         }
     }
-    mNear.clear();
-    mKept->grid.query(all, [&](int fi) { mNear.push_back(fi); });
-    for (const int fi : mNear) {
-        if (fi == goneFaces[0] || fi == goneFaces[1] || std::size_t(fi) >= mMesh.n_faces()) continue;
+    std::vector<int>& near = scratch.near;
+    near.clear();
+    mKept->grid.query(all, [&](int fi) { near.push_back(fi); });
+    for (const int fi : near) {
+        if (std::size_t(fi) >= mMesh.n_faces()) continue;
         const FaceHandle f(fi);
         if (mMesh.status(f).deleted()) continue;
         const HalfedgeHandle h = mMesh.halfedge_handle(f);
         const std::array<int, 3> ids = {mMesh.from_vertex_handle(h).idx(), mMesh.to_vertex_handle(h).idx(),
                                         mMesh.to_vertex_handle(mMesh.next_halfedge_handle(h)).idx()};
-        if (std::any_of(ids.begin(), ids.end(), [&](int x) { return x == gone[0] || x == gone[1]; })) continue;
+        if (skip(fi, ids)) continue;
         const std::array<const double*, 3> q = {mMesh.point(VertexHandle(ids[0])).data(),
                                                 mMesh.point(VertexHandle(ids[1])).data(),
                                                 mMesh.point(VertexHandle(ids[2])).data()};
@@ -182,6 +191,47 @@ bool IntersectionGuard::crosses(const std::vector<Triangle>& made, const std::ar
     return false;
 }
 
+bool IntersectionGuard::facesAroundAreClear(const std::vector<int>& around)
+{
+    if (!mBuilt) build();
+    // Each live face around them once, owned by the first of `around` among its corners (the
+    // vertex k's faces: mOwned[mStart[k], mStart[k + 1])).
+    mOwner.assign(mMesh.n_faces(), -1);
+    mStart.assign(around.size() + 1, 0);
+    mOwned.clear();
+    for (std::size_t k = 0; k < around.size(); ++k) {
+        mStart[k] = mOwned.size();
+        const VertexHandle v(around[k]);
+        if (std::size_t(around[k]) >= mMesh.n_vertices() || mMesh.status(v).deleted()) continue;
+        for (auto f = mMesh.cvf_begin(v); f.is_valid(); ++f) {
+            int& owner = mOwner[std::size_t(f->idx())];
+            if (owner >= 0) continue;
+            owner = int(k);
+            mOwned.push_back(f->idx());
+        }
+    }
+    mStart[around.size()] = mOwned.size();
+    // Each vertex's faces as the made triangles of an edit: against each other, and against the
+    // faces near them but their own and those of a vertex before it (that one tested the pair).
+    std::atomic<bool> crossing{false};
+    detail::parallelForChunks(0, around.size(), 16, [&](std::size_t k0, std::size_t k1) {
+        static thread_local std::vector<Triangle> made;
+        static thread_local Scratch scratch;
+        for (std::size_t k = k0; k < k1 && !crossing.load(std::memory_order_relaxed); ++k) {
+            if (mStart[k] == mStart[k + 1]) continue;
+            made.clear();
+            for (std::size_t i = mStart[k]; i < mStart[k + 1]; ++i) made.push_back(triangle(FaceHandle(mOwned[i])));
+            const int self = int(k);
+            if (crosses(made, scratch, [&](int fi, const std::array<int, 3>&) {
+                    const int owner = mOwner[std::size_t(fi)];
+                    return owner >= 0 && owner <= self;
+                }))
+                crossing = true;
+        }
+    });
+    return !crossing;
+}
+
 bool IntersectionGuard::isCollapseSafe(HalfedgeHandle h, const Vec3& target)
 {
     const VertexHandle u = mMesh.from_vertex_handle(h), v = mMesh.to_vertex_handle(h);
@@ -199,7 +249,11 @@ bool IntersectionGuard::isCollapseSafe(HalfedgeHandle h, const Vec3& target)
             }
             mMade.push_back(t);
         }
-    return !crosses(mMade, {u.idx(), v.idx()}, {-1, -1});
+    if (!mBuilt) build();
+    const int gone[2] = {u.idx(), v.idx()};
+    return !crosses(mMade, mScratch, [&](int, const std::array<int, 3>& ids) {
+        return std::any_of(ids.begin(), ids.end(), [&](int x) { return x == gone[0] || x == gone[1]; });
+    });
 }
 
 bool IntersectionGuard::isFlipSafe(EdgeHandle e)
@@ -211,7 +265,9 @@ bool IntersectionGuard::isFlipSafe(EdgeHandle e)
     mMade.clear();
     mMade.push_back({{u.idx(), b.idx(), a.idx()}, {position(mMesh, u), position(mMesh, b), position(mMesh, a)}});
     mMade.push_back({{v.idx(), a.idx(), b.idx()}, {position(mMesh, v), position(mMesh, a), position(mMesh, b)}});
-    return !crosses(mMade, {-1, -1}, {mMesh.face_handle(h).idx(), mMesh.face_handle(o).idx()});
+    if (!mBuilt) build();
+    const int goneFaces[2] = {mMesh.face_handle(h).idx(), mMesh.face_handle(o).idx()};
+    return !crosses(mMade, mScratch, [&](int fi, const std::array<int, 3>&) { return fi == goneFaces[0] || fi == goneFaces[1]; });
 }
 
 } // namespace riemesh::detail

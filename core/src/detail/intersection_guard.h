@@ -46,29 +46,42 @@ public:
     /// After an edit that changed the faces around v (a split, a collapse kept v, a flip made v a
     /// corner of both new faces): enters them with their new boxes.
     void update(VertexHandle v);
+    /// After edits made without asking (see RegularityOptions::checkEditsTogether): the live faces
+    /// around the vertices `around` cross no face and come no closer than minSeparation to a face
+    /// they share no vertex with (the tests of isCollapseSafe, each pair once), in parallel.
+    bool facesAroundAreClear(const std::vector<int>& around);
 
 private:
     struct Triangle {
         std::array<int, 3> ids;
         std::array<Vec3, 3> p;
     };
+    /// One search's buffers (a thread's own in facesAroundAreClear).
+    struct Scratch {
+        std::vector<Box6> boxes;
+        std::vector<int> near;
+    };
     void build();
     /// Enters face f again if it has left the box it was entered with (or was never entered).
     void enter(FaceHandle f);
-    /// One of `made` (the edit's new triangles) meets another or a live face of the mesh that
-    /// has none of the `gone` vertices and is not one of the `goneFaces`.
-    bool crosses(const std::vector<Triangle>& made, const std::array<int, 2>& gone, const std::array<int, 2>& goneFaces);
+    /// One of `made` (new triangles) meets another or a live face of the mesh, but for those
+    /// skip(face index, its corners) leaves out.
+    template <class Skip>
+    bool crosses(const std::vector<Triangle>& made, Scratch& scratch, Skip&& skip) const;
     Box6 faceBox(FaceHandle f) const;
+    Triangle triangle(FaceHandle f) const;
 
     const Mesh& mMesh;
     double mMinSeparation = 0;
     GuardGrid mOwn;
     GuardGrid* mKept;
     bool mBuilt = false;
-    std::vector<Box6> mBoxes; // scratch
+    std::vector<Box6> mBoxes;    // scratch
     std::vector<Triangle> mMade; // scratch
-    std::vector<int> mNear;      // scratch
-    std::vector<Box6> mMadeBoxes; // scratch
+    Scratch mScratch;
+    std::vector<int> mOwner;      // (facesAroundAreClear's, by face index)
+    std::vector<std::size_t> mStart; // (facesAroundAreClear's)
+    std::vector<int> mOwned;         // (facesAroundAreClear's)
 };
 
 } // namespace riemesh::detail
