@@ -72,8 +72,9 @@ public:
     VertexMetrics(Mesh& mesh, const MetricField& metric);
 
     /// G at vertex v's current position. (Inline: the regularity step and the collision search
-    /// read it about a million times on the 100^3 phantom; the cache hit is a compare and a copy.)
-    Mat3 at(VertexHandle v) const
+    /// read it about a million times on the 100^3 phantom; the cache hit is a compare and a copy.
+    /// Forced: GCC 12 left it out of line once the regularity step grew.)
+    [[gnu::always_inline]] Mat3 at(VertexHandle v) const
     {
         if (mEuclidean) return Mat3::Identity();
         if (mHasCache) {
