@@ -481,6 +481,10 @@ TEST_CASE("regularity: the edit guard's grid kept from call to call makes the sa
     guarded.maxPasses = 2;
     guarded.intersectionFree = true;
     guarded.minSeparation = 1e-4;
+    // (Each edit asked in turn: with a cache, edits are checked together only after calls with
+    // many edits, and not right after one that had to be made again; without, always. That
+    // mode has its own test below.)
+    guarded.checkEditsTogether = false;
     RegularityOptions plain = guarded;
     plain.intersectionFree = false;
     RegularityCache cache;

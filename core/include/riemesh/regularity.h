@@ -25,6 +25,8 @@ struct RegularityOptions {
     /// would cross a face or come too close, the mesh is put back as it was and the edits made
     /// again, each checked in turn (RegularityStats::editsRedone). Either way no face of the
     /// result crosses another; when no edit is refused, the same mesh as checking each in turn.
+    /// With a RegularityCache, only after a call with many edits, and not in the few calls after
+    /// one that had to be made again.
     bool checkEditsTogether = true;
     /// Decide the queued collapses' checks in parallel before the collapse pass, which then reuses
     /// each edge's verdict while no collapse has changed what it read. The same mesh either way
