@@ -583,11 +583,10 @@ void SafeStepCache::Impl::candidates(Mesh& mesh, const StepGeometry& g, const Sa
     // The live faces and edges without a pass over them: split, collapse and flip keep the Euler
     // characteristic, and any other edit is followed by garbage collection and invalidate(); on
     // a closed triangle mesh E = 3 (V - chi) and F = 2 (V - chi).
-    // (Or when half of them have been anchored again since, see settle: the rebuild's grids are
-    // then mostly stale.)
+    // (Or when options.reanchorFraction of them have been anchored again since, see settle.)
     const double liveFacesEdges = 5.0 * (double(liveV) - double(chi0));
     if (!rebuilt && (double(dirtyF.size() + dirtyE.size()) > options.rebuildFraction * liveFacesEdges ||
-                     double(movedFacesEdges) > 2 * options.rebuildFraction * liveFacesEdges)) {
+                     double(movedFacesEdges) > options.reanchorFraction * liveFacesEdges)) {
         anchorHere(mesh, g, options);
         classify(mesh, g);
         rebuilt = true;
