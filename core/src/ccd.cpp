@@ -450,7 +450,8 @@ struct SafeStepCache::Impl {
     void candidates(Mesh& mesh, const StepGeometry& g, const SafeStepOptions& options, std::vector<Quad>& out,
                     SafeStepStats& stats);
     void anchorHere(Mesh& mesh, const StepGeometry& g, const SafeStepOptions& options);
-    void rebuild(const Mesh& mesh, const std::vector<Vec3>& anchors, double eta, double cell, double radiusFraction);
+    void rebuild(const Mesh& mesh, const std::vector<Vec3>& anchors, double eta, double cell, double radiusFraction,
+                 double gridCell);
     void classify(const Mesh& mesh, const StepGeometry& g);
     void collect(const Mesh& mesh, const StepGeometry& g, std::vector<Quad>& candidates);
     void settle(Mesh& mesh, const StepGeometry& g, double motion, const SafeStepOptions& options, SafeStepStats& stats);
@@ -620,7 +621,7 @@ void SafeStepCache::Impl::anchorHere(Mesh& mesh, const StepGeometry& g, const Sa
     forLive<VertexHandle>(mesh, mesh.n_vertices(), [&](std::size_t i) {
         ahead[i] = anchorAheadOf(g.start[i], g.end[i] - g.start[i], most, options);
     });
-    rebuild(mesh, ahead, g.eta, cell, options.clearance);
+    rebuild(mesh, ahead, g.eta, cell, options.clearance, options.anchoredCell * cell);
     chi0 = int(vertexOf.size()) - int(edgeOf.size()) + int(faceOf.size()); // (the grids hold the live elements)
     // The edits so far are in faceAt0 and edgeAt0: mark the next ones.
     OpenMesh::VPropHandleT<char> edited;
@@ -629,7 +630,7 @@ void SafeStepCache::Impl::anchorHere(Mesh& mesh, const StepGeometry& g, const Sa
 }
 
 void SafeStepCache::Impl::rebuild(const Mesh& mesh, const std::vector<Vec3>& anchors, double eta, double cell,
-                                  double radiusFraction)
+                                  double radiusFraction, double gridCell)
 {
     ++rebuilds;
     valid = true;
@@ -656,9 +657,9 @@ void SafeStepCache::Impl::rebuild(const Mesh& mesh, const std::vector<Vec3>& anc
     movedF.assign(faces0, 0);
     movedE.assign(edges0, 0);
     movedFacesEdges = 0;
-    overVertexGrid.reset(cell, 1024, vertices0);
-    overFaceGrid.reset(cell, 4096, faces0);
-    overEdgeGrid.reset(cell, 4096, edges0);
+    overVertexGrid.reset(gridCell, 1024, vertices0);
+    overFaceGrid.reset(gridCell, 4096, faces0);
+    overEdgeGrid.reset(gridCell, 4096, edges0);
     const double faceGrow = 0.5 * C + eta, edgeGrow = 0.5 * C + 0.5 * eta;
     vertexOf.clear();
     anchoredBoxes[0].clear();
@@ -679,7 +680,7 @@ void SafeStepCache::Impl::rebuild(const Mesh& mesh, const std::vector<Vec3>& anc
     boxesOf(faceAt0, faceOf, anchoredBoxes[1], faceGrow);
     boxesOf(edgeAt0, edgeOf, anchoredBoxes[2], edgeGrow);
     frame = buildGridsToPair(anchoredBoxes[0], vertexGrid, anchoredBoxes[1], faceGrid, anchoredBoxes[2], edgeGrid,
-                             cell);
+                             gridCell);
     // The pairs closer than C: those whose boxes overlap (grown by C / 2 and eta, they meet
     // wherever the primitives are within C + eta), measured.
     const double C2 = C * C;

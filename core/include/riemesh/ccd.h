@@ -74,6 +74,18 @@ struct SafeStepOptions {
     /// (ch2bet, iso 40) 6.45 / 6.19 s, atlas (aal, iso 0.5) 0.936 / 0.924 s; ball, two spheres
     /// and thin plate within 2%.
     double reanchorFraction = 0.1;
+    /// With a SafeStepCache: the cells of the grids of the anchored faces, edges and vertices (and
+    /// of the primitives a step searches afresh against them), in multiples of the faces' mean
+    /// extent. Their boxes are grown by half the clearance radius on each side: in cells of one
+    /// extent, a face was entered in about 8 cells, and building the grids was half of a
+    /// rebuild's work, a third of the cache's on the head MRI once the mesh is anchored anew more
+    /// often (reanchorFraction). Measured (issue 17), one thread, instructions of the
+    /// collision-safe steps at 1 / 1.5 / 2: head MRI (iso 40) 1,100.6 / 1,058.5 / 1,073.1 M,
+    /// phantom 100^3 376.7 / 384.4 / 374.7 M, phantom 200^3 1,027.9 / 986.4 / 1,050.3 M, atlas
+    /// (aal, iso 0.5) 1,996.4 / 1,895.7 / 1,910.4 M; guarded evolution, 2 threads, fastest of 6
+    /// alternating runs: head 0.601 / 0.591 / 0.577 s. The same meshes (the boxes decide the
+    /// pairs; the cells only where they are looked for).
+    double anchoredCell = 1.5;
     /// With a SafeStepCache: a vertex is anchored ahead of where it is, along its motion in the
     /// step that anchors it, as far as anchorAhead such motions and at most anchorAheadFraction of
     /// the largest allowed drift ((C - minSeparation) / 2): a vertex that keeps creeping the same
