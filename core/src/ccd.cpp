@@ -1195,8 +1195,8 @@ SafeStepStats limitStepToCollisionFree(Mesh& mesh, const std::vector<Vec3>& star
     if (!cache || double(far) > 0.5 * options.rebuildFraction * double(live.size())) {
         if (cache) cache->invalidate();
         collectPrimitives(mesh, scratch.faces, scratch.edges);
-        allCandidates(g, live, scratch.faces, scratch.edges, cell, scratch.vertexBox, scratch.faceBox, scratch.edgeBox,
-                      scratch.grids, scratch.lists, candidates);
+        allCandidates(g, live, scratch.faces, scratch.edges, options.scratchCell * cell, scratch.vertexBox,
+                      scratch.faceBox, scratch.edgeBox, scratch.grids, scratch.lists, candidates);
     } else {
         cache->impl().candidates(mesh, g, options, candidates, stats);
         cached = true;
