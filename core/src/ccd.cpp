@@ -398,7 +398,8 @@ void allCandidates(const StepGeometry& g, const std::vector<int>& live, const st
 /// than half the clearance radius since (see SafeStepCache in riemesh/ccd.h).
 struct SafeStepCache::Impl {
     bool valid = false;
-    double cell = 0; ///< the grids' cell size at the rebuild
+    /// The faces' mean extent at the rebuild (the grids' cells are SafeStepOptions::anchoredCell times it).
+    double cell = 0;
     std::size_t vertices0 = 0, faces0 = 0, edges0 = 0; ///< element counts (with deleted ones) at the rebuild
     std::vector<Vec3> anchor;                          ///< positions at the rebuild, by vertex index
     std::vector<std::array<int, 3>> faceAt0;           ///< faces' corners at the rebuild, by face index
