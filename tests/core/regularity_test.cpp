@@ -554,3 +554,32 @@ TEST_CASE("regularity: edits checked together make the same mesh as checked in t
     CHECK(redone > 0); // (the guard refuses edits here: the check must find them)
     CHECK(kept > 0);
 }
+
+TEST_CASE("regularity: with a cache, the calls right after one made again ask each edit in turn")
+{
+    // The same coarsening sphere in a sphere, with a RegularityCache: a call whose edits, checked
+    // together, had to be made again is followed by calls that ask each edit in turn (they can
+    // never have to be made again), for a few calls; no crossing after any call that started
+    // without one.
+    const EuclideanMetric metric;
+    Mesh a = sphereInSphere();
+    std::mt19937 rng(2029);
+    RegularityOptions options;
+    options.maxPasses = 2;
+    options.intersectionFree = true;
+    options.minSeparation = 1e-4;
+    RegularityCache cache;
+    std::vector<int> redoneAt;
+    for (int it = 0; it < 40; ++it) {
+        options.delta = 0.05 + 0.004 * it;
+        turnAndJitter(rng, {&a});
+        const bool clean = findSelfIntersections(a).count() == 0;
+        const auto stats = enforceRegularity(a, metric, options, &cache);
+        CAPTURE(it);
+        REQUIRE_MESH_OK(a);
+        if (clean) CHECK(findSelfIntersections(a).count() == 0);
+        if (stats.editsRedone) redoneAt.push_back(it);
+    }
+    REQUIRE(!redoneAt.empty());
+    for (std::size_t k = 1; k < redoneAt.size(); ++k) CHECK(redoneAt[k] - redoneAt[k - 1] > 8);
+}
