@@ -559,8 +559,8 @@ TEST_CASE("regularity: with a cache, the calls right after one made again ask ea
 {
     // The same coarsening sphere in a sphere, with a RegularityCache: a call whose edits, checked
     // together, had to be made again is followed by calls that ask each edit in turn (they can
-    // never have to be made again), for a few calls; no crossing after any call that started
-    // without one.
+    // never have to be made again), for a few calls; a valid mesh without crossings after any
+    // call that started without one.
     const EuclideanMetric metric;
     Mesh a = sphereInSphere();
     std::mt19937 rng(2029);
@@ -576,8 +576,10 @@ TEST_CASE("regularity: with a cache, the calls right after one made again ask ea
         const bool clean = findSelfIntersections(a).count() == 0;
         const auto stats = enforceRegularity(a, metric, options, &cache);
         CAPTURE(it);
-        REQUIRE_MESH_OK(a);
-        if (clean) CHECK(findSelfIntersections(a).count() == 0);
+        if (clean) { // (from delta 0.18 on, the jittered spheres may cross each other by themselves)
+            REQUIRE_MESH_OK(a);
+            CHECK(findSelfIntersections(a).count() == 0);
+        }
         if (stats.editsRedone) redoneAt.push_back(it);
     }
     REQUIRE(!redoneAt.empty());
