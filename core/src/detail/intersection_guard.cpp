@@ -16,6 +16,13 @@ namespace {
 /// entered again per regularity step (see RegularityCache in riemesh/regularity.h).
 constexpr double kGuardMargin = 0.1;
 
+/// `inner` lies within `outer` (closed).
+bool contains(const Box6& outer, const Box6& inner)
+{
+    return outer[0] <= inner[0] && outer[1] <= inner[1] && outer[2] <= inner[2] && inner[3] <= outer[3] &&
+           inner[4] <= outer[4] && inner[5] <= outer[5];
+}
+
 Box6 grownBy(Box6 box, double margin)
 {
     for (int k = 0; k < 3; ++k) box[k] -= margin, box[k + 3] += margin;
@@ -44,9 +51,7 @@ void IntersectionGuard::enter(FaceHandle f)
     const Box6 box = faceBox(f);
     if (i >= g.loose.size()) g.loose.resize(i + 1, Box6{1, 1, 1, -1, -1, -1}); // (contains nothing)
     Box6& loose = g.loose[i];
-    if (loose[0] <= box[0] && loose[1] <= box[1] && loose[2] <= box[2] && box[3] <= loose[3] && box[4] <= loose[4] &&
-        box[5] <= loose[5])
-        return;
+    if (contains(loose, box)) return;
     loose = grownBy(box, g.margin);
     g.grid.insert(f.idx(), loose);
 }
@@ -62,7 +67,17 @@ void IntersectionGuard::build()
     if (g.valid && mMesh.n_faces() >= g.loose.size()) { // (fewer faces: renumbered, see RegularityCache)
         for (auto f : mMesh.faces()) (void)f, ++live;
         if (2 * live >= g.faces && live <= 2 * g.faces) {
-            for (auto f : mMesh.faces()) enter(f);
+            // Which faces left their boxes, in parallel; those entered again in index order (the
+            // grid is not thread-safe). Head MRI, guarded: 13,000 faces a regularity step, 1.5 M
+            // instructions in the sequential part of the iteration.
+            const std::size_t nf = mMesh.n_faces();
+            g.loose.resize(nf, Box6{1, 1, 1, -1, -1, -1}); // (new faces: contains nothing)
+            g.left.assign(nf, 0);
+            forLive<FaceHandle>(mMesh, nf, 2048, [&](std::size_t i) {
+                g.left[i] = !contains(g.loose[i], faceBox(FaceHandle(int(i))));
+            });
+            for (std::size_t i = 0; i < nf; ++i)
+                if (g.left[i]) enter(FaceHandle(int(i)));
             return;
         }
     }

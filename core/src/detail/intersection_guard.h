@@ -25,6 +25,7 @@ struct GuardGrid {
     double margin = 0;       ///< world units
     std::size_t faces = 0;   ///< live faces when the grid was built
     bool valid = false;
+    std::vector<char> left;  ///< (scratch: by face index, left its box since it was entered)
 };
 
 class IntersectionGuard {
