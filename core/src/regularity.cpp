@@ -800,6 +800,12 @@ RegularityCache::RegularityCache() : mImpl(std::make_unique<Impl>()) {}
 RegularityCache::~RegularityCache() = default;
 RegularityCache::RegularityCache(RegularityCache&&) noexcept = default;
 RegularityCache& RegularityCache::operator=(RegularityCache&&) noexcept = default;
+RegularityCache::Mode RegularityCache::mode() const { return {mImpl->lastEdits, mImpl->pause}; }
+void RegularityCache::setMode(const Mode& mode)
+{
+    mImpl->lastEdits = mode.lastEdits;
+    mImpl->pause = mode.pause;
+}
 void RegularityCache::invalidate()
 {
     mImpl->guard.valid = false;

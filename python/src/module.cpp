@@ -183,6 +183,8 @@ py::dict iterationDict(const IterationStats& s)
     d["removed_components"] = s.removedComponents;
     d["travelling"] = s.moving;
     d["intersection_free"] = s.intersectionFree;
+    d["cut_short"] = s.cutShort;
+    d["regularity_redone"] = s.regularityRedone;
     d["ms"] = s.milliseconds;
     return d;
 }

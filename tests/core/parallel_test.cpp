@@ -100,13 +100,15 @@ bool identical(const Outcome& a, const Outcome& b)
     return true;
 }
 
-/// Runs the scenario on 1 and on 2 threads and requires the same outcome; returns it.
+/// Runs the scenario on 1 and on 2 threads and requires the same outcome; returns it (`onTwo`: the
+/// iterations on 2 threads).
 Outcome checkSameForOneAndTwoThreads(const Mesh& start, const ScalarImage& image, const MetricField& metric,
-                                     const EvolutionOptions& options)
+                                     const EvolutionOptions& options, std::vector<IterationStats>* onTwo = nullptr)
 {
     ThreadCountGuard guard;
     const Outcome one = run(1, start, image, metric, options);
     const Outcome two = run(2, start, image, metric, options);
+    if (onTwo) *onTwo = two.iterations;
     INFO("1 thread: " << one.points.size() << " vertices, " << one.iterations.size() << " iterations; 2 threads: "
                       << two.points.size() << " vertices, " << two.iterations.size() << " iterations");
     CHECK(one.failures == 0);
@@ -222,9 +224,11 @@ TEST_CASE("parallel: a box pinching apart onto two balls gives the same meshes o
 TEST_CASE("parallel: the intersection-free evolution gives the same meshes on 1 and 2 threads")
 {
     // On 2 threads the collision-safe step measures the pairs of the vertices it anchors again
-    // while the regularity step edits the mesh (SafeStepCache); on 1 it does so before. Two
-    // bubbles merging inside a ball, and a box pinching apart onto two balls: merges, cuts and
-    // the garbage collections after them while a measurement may be under way.
+    // while the regularity step edits the mesh (SafeStepCache), and the step itself runs beside
+    // the regularity step, which is made again when the step comes out cut short (Evolution::
+    // step); on 1 thread each comes before. Two bubbles merging inside a ball, and a box pinching
+    // apart onto two balls: merges, cuts and the garbage collections after them while a
+    // measurement may be under way, and a step cut short.
     EvolutionOptions options = baseOptions(0.8);
     options.intersectionFree = true;
     const auto ball = fogImage([](const Vec3& x) { return ballSdf(x, Vec3::Zero(), 9); },
@@ -235,8 +239,15 @@ TEST_CASE("parallel: the intersection-free evolution gives the same meshes on 1 
     const auto balls = fogImage(
         [](const Vec3& x) { return std::max(ballSdf(x, Vec3(-7, 0, 0), 5), ballSdf(x, Vec3(7, 0, 0), 5)); },
         Box3(Vec3(-15, -8, -8), Vec3(15, 8, 8)));
-    const Outcome cut = checkSameForOneAndTwoThreads(makeInitialBox(balls, 1.6), balls, EuclideanMetric(), options);
+    std::vector<IterationStats> onTwo;
+    const Outcome cut = checkSameForOneAndTwoThreads(makeInitialBox(balls, 1.6), balls, EuclideanMetric(), options, &onTwo);
     CHECK(cuts(cut) >= 1);
+    int cutShort = 0, redoneOnOne = 0, redoneOnTwo = 0;
+    for (const IterationStats& it : cut.iterations) cutShort += it.cutShort > 0, redoneOnOne += it.regularityRedone;
+    for (const IterationStats& it : onTwo) redoneOnTwo += it.regularityRedone;
+    CHECK(cutShort >= 1);
+    CHECK(redoneOnOne == 0);
+    if (isParallel()) CHECK(redoneOnTwo >= 1); // (the regularity step made again, and the same mesh)
 }
 
 TEST_CASE("parallel: a dumbbell whose tube is cut gives the same meshes on 1 and 2 threads")

@@ -411,6 +411,8 @@ std::string pipelineStatsJson(const PipelineResult& r, const PipelineRecord& rec
                               {"removed_components", s.removedComponents},
                               {"travelling", s.moving},
                               {"intersection_free", s.intersectionFree},
+                              {"cut_short", s.cutShort},
+                              {"regularity_redone", s.regularityRedone},
                               {"ms", s.milliseconds}});
     j["iterations"] = std::move(iterations);
     const auto& e = r.evolution;

@@ -15,6 +15,7 @@
 
 #include <cstddef>
 #include <functional>
+#include <memory>
 #include <string>
 #include <utility>
 #include <vector>
@@ -30,9 +31,15 @@ struct IterationStats {
     int splits = 0, collapses = 0, flips = 0, merges = 0, cuts = 0;
     int removedComponents = 0; ///< specks left by cuts and deleted (see removeSmallComponents)
     bool intersectionFree = false; ///< evolved with the guarantee (asked for, or after a tangle: untangledAt())
+    std::size_t cutShort = 0;      ///< with the guarantee: vertices whose motion the collision-safe step cut short
+    /// With the guarantee, on several threads: the regularity step, run beside the collision-safe
+    /// step, was made again after it (the step came out cut short; see Evolution::step).
+    bool regularityRedone = false;
     double milliseconds = 0;
     /// Where the milliseconds went: forces, integration, regularity (paper 3.1), collision
-    /// detection (3.2), topology changes and housekeeping (holds, specks, compaction).
+    /// detection (3.2), topology changes and housekeeping (holds, specks, compaction). With the
+    /// guarantee on several threads the collision-safe step runs beside the regularity step: what
+    /// it takes beyond it counts as regularity.
     struct Phases {
         double forces = 0, integration = 0, regularity = 0, collisions = 0, topology = 0;
     } phases;
@@ -185,6 +192,9 @@ public:
     /// this object. Convergence (and done()) is that of the last level; options.maxIterations caps
     /// the iterations of all levels together.
     Evolution(Mesh& mesh, std::vector<EvolutionLevel> levels, const MetricField& metric, const EvolutionOptions& options = {});
+    ~Evolution();
+    Evolution(const Evolution&) = delete;
+    Evolution& operator=(const Evolution&) = delete;
     /// One iteration; returns its statistics. Does nothing once done().
     IterationStats step();
     bool done() const { return mReason != StopReason::Running; }
@@ -245,6 +255,8 @@ private:
     std::vector<Vec3> mStepEnd;   ///< where integration meant them to go (intersectionFree)
     SafeStepCache mSafeStepCache; ///< the collision-safe step's clearances (intersectionFree)
     RegularityCache mRegularityCache; ///< the edit guard's grid of the faces (intersectionFree)
+    struct Beside; ///< the collision-safe step run beside the regularity step (see step())
+    std::unique_ptr<Beside> mBeside;
     StopReason mReason = StopReason::Running;
     int mLastTopologyEvent = 0;
     int mLastCut = 0;   ///< iteration of the last tunnel cut (0: none)

@@ -57,6 +57,15 @@ public:
     RegularityCache(RegularityCache&&) noexcept;
     RegularityCache& operator=(RegularityCache&&) noexcept;
     void invalidate();
+    /// What decides how the next call checks its edits, together or one by one (see
+    /// RegularityOptions::checkEditsTogether): kept by Evolution across a regularity step it
+    /// makes again (see Evolution::step), so that the call made again decides as the first did.
+    struct Mode {
+        std::size_t lastEdits = 0;
+        int pause = 0;
+    };
+    Mode mode() const;
+    void setMode(const Mode& mode);
 
     struct Impl;
     Impl& impl() { return *mImpl; } ///< (regularity.cpp's)
