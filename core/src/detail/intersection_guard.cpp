@@ -16,6 +16,9 @@ namespace {
 /// entered again per regularity step (see RegularityCache in riemesh/regularity.h).
 constexpr double kGuardMargin = 0.1;
 
+/// A face's box before it is entered: contains nothing (see GuardGrid::loose).
+constexpr Box6 kNoBox = {1, 1, 1, -1, -1, -1};
+
 /// `inner` lies within `outer` (closed).
 bool contains(const Box6& outer, const Box6& inner)
 {
@@ -49,7 +52,7 @@ void IntersectionGuard::enter(FaceHandle f)
     GuardGrid& g = *mKept;
     const std::size_t i = std::size_t(f.idx());
     const Box6 box = faceBox(f);
-    if (i >= g.loose.size()) g.loose.resize(i + 1, Box6{1, 1, 1, -1, -1, -1}); // (contains nothing)
+    if (i >= g.loose.size()) g.loose.resize(i + 1, kNoBox);
     Box6& loose = g.loose[i];
     if (contains(loose, box)) return;
     loose = grownBy(box, g.margin);
@@ -71,7 +74,7 @@ void IntersectionGuard::build()
             // grid is not thread-safe). Head MRI, guarded: 13,000 faces a regularity step, 1.5 M
             // instructions in the sequential part of the iteration.
             const std::size_t nf = mMesh.n_faces();
-            g.loose.resize(nf, Box6{1, 1, 1, -1, -1, -1}); // (new faces: contains nothing)
+            g.loose.resize(nf, kNoBox); // (new faces)
             g.left.assign(nf, 0);
             forLive<FaceHandle>(mMesh, nf, 2048, [&](std::size_t i) {
                 g.left[i] = !contains(g.loose[i], faceBox(FaceHandle(int(i))));
@@ -102,7 +105,7 @@ void IntersectionGuard::build()
     g.margin = kGuardMargin * mean;
     g.faces = count;
     g.valid = true;
-    g.loose.assign(mMesh.n_faces(), Box6{1, 1, 1, -1, -1, -1});
+    g.loose.assign(mMesh.n_faces(), kNoBox);
     for (auto f : mMesh.faces()) {
         Box6& loose = g.loose[std::size_t(f.idx())];
         loose = grownBy(mBoxes[std::size_t(f.idx())], g.margin);
