@@ -429,7 +429,15 @@ public:
             const Item& it = mItems[i];
             if (!it.inCells) continue;
             forCells(it, [&](std::uint64_t key, std::uint8_t lowest) {
-                mEntries[mFill[bucketOf(key)]++] = Entry{key, std::int32_t(i), it.box, lowest};
+                // Written in place: an Entry made on the stack and copied was stored and loaded
+                // back in pieces that did not match (a store-to-load forwarding stall per entry).
+                // Head MRI, guarded, one thread: the three grids of a step from scratch at 6,600
+                // vertices built in 3.7-5.2 ms that way, 2.7-3.7 ms this way.
+                Entry& e = mEntries[mFill[bucketOf(key)]++];
+                e.key = key;
+                e.item = std::int32_t(i);
+                e.box = it.box;
+                e.lowest = lowest;
             });
         }
     }
@@ -453,7 +461,7 @@ public:
                 continue;
             }
             forCells(it, [&](std::uint64_t key, std::uint8_t lowest) {
-                mEntries.push_back(Entry{key, std::int32_t(i), it.box, lowest});
+                mEntries.emplace_back(key, std::int32_t(i), it.box, lowest); // (in place: see build)
             });
         }
         mMask = bucketCount(mEntries.size()) - 1;
@@ -490,10 +498,7 @@ public:
                                 }) - d.begin());
                 for (end = j; end < d.size() && second.bucketOf(d[end].key) == b;) ++end;
             }
-            for (; j < end; ++j) {
-                const Entry& y = second.mEntries[j];
-                if (x.key == y.key && meet(x, y)) f(int(x.item), int(y.item));
-            }
+            second.meetRun(x, j, end, [&](const Entry& y) { f(int(x.item), int(y.item)); });
         }
     }
     /// Within one grid: f(a, b), a < b, once for every two items whose boxes overlap (but for
@@ -506,12 +511,11 @@ public:
         for (std::size_t i = e0; i < e1; ++i) {
             const Entry& x = mEntries[i];
             const std::size_t b = bucketOf(x.key);
-            const std::size_t end = mSparse ? mEntries.size() : std::size_t(mStart[b + 1]);
-            for (std::size_t j = i + 1; j < end; ++j) {
-                const Entry& y = mEntries[j];
-                if (mSparse && bucketOf(y.key) != b) break; // (the end of its bucket)
-                if (x.key == y.key && meet(x, y)) f(int(x.item), int(y.item));
-            }
+            std::size_t end = i + 1;
+            if (!mSparse) end = std::size_t(mStart[b + 1]);
+            else // (the end of its bucket)
+                while (end < mEntries.size() && bucketOf(mEntries[end].key) == b) ++end;
+            meetRun(x, i + 1, end, [&](const Entry& y) { f(int(x.item), int(y.item)); });
         }
     }
     /// Entries of the grid (for the ranges of pairsAcross and pairsWithin).
@@ -694,12 +698,28 @@ private:
                       std::uint8_t(lowestXY | (z == it.first[2] ? 4 : 0)));
             }
     }
-    /// Two entries of one cell: their boxes overlap, and the cell is the lower corner's of their
-    /// intersection (on each axis the first cell of one of them).
-    static bool meet(const Entry& x, const Entry& y)
+    /// f(y), in order, for each entry y of [j0, j1) that meets x: of x's cell, their boxes
+    /// overlap, and the cell is the lower corner's of their intersection (on each axis the first
+    /// cell of one of them). Without a branch per entry, in blocks (the hits' indices, then the
+    /// hits), as query(): each test of the pairing was a branch taken about half the time at
+    /// random. Head MRI, guarded, one thread: a step from scratch at 6,600 vertices paired its
+    /// grids in 5.5-6.7 ms with a branch per test, in 4.0-4.9 ms without (the same pairs, in the
+    /// same order).
+    template <class F>
+    void meetRun(const Entry& x, std::size_t j0, std::size_t j1, F&& f) const
     {
-        return ((x.lowest | y.lowest) & 7) == 7 && x.box[0] <= y.box[3] && y.box[0] <= x.box[3] &&
-               x.box[1] <= y.box[4] && y.box[1] <= x.box[4] && x.box[2] <= y.box[5] && y.box[2] <= x.box[5];
+        std::uint32_t hits[32];
+        for (std::size_t j = j0; j < j1;) {
+            int count = 0;
+            for (const std::size_t stop = std::min(j1, j + 32); j < stop; ++j) {
+                const Entry& y = mEntries[j];
+                hits[count] = std::uint32_t(j);
+                count += (x.key == y.key) & (((x.lowest | y.lowest) & 7) == 7) & (x.box[0] <= y.box[3]) &
+                         (y.box[0] <= x.box[3]) & (x.box[1] <= y.box[4]) & (y.box[1] <= x.box[4]) &
+                         (x.box[2] <= y.box[5]) & (y.box[2] <= x.box[5]);
+            }
+            for (int h = 0; h < count; ++h) f(mEntries[hits[h]]);
+        }
     }
     static bool overlapsF(const std::array<float, 6>& a, const std::array<float, 6>& b)
     {
