@@ -357,24 +357,6 @@ IterationStats Evolution::step()
         ro.zeta = o.zeta / c;
     }
     RegularityStats rs = enforceRegularity(mMesh, metric, ro, &mRegularityCache);
-    if (besides) {
-        beside.job.wait();
-        it.cutShort = beside.stats.shortened;
-        if (beside.stats.shortened == 0) {
-            const std::size_t n = beside.mesh.n_vertices(); // (the step's marks, with the edits')
-            for (std::size_t i = 0; i < n; ++i)
-                if (beside.mesh.property(edited, VertexHandle(int(i)))) mMesh.property(edited, VertexHandle(int(i))) = 1;
-        } else { // cut short: the regularity step made again after it
-            mMesh = beside.mesh;
-            is = accountForShortenedStep(mMesh, mStepStart, mStepEnd, io);
-            vertexMetrics.update();
-            mRegularityCache.invalidate(); // (its grid saw faces that are gone)
-            mRegularityCache.setMode(regularityMode);
-            rs = enforceRegularity(mMesh, metric, ro, &mRegularityCache);
-            beside.pause = kBesidePause;
-            it.regularityRedone = true;
-        }
-    }
     keepObjectNecks(mMesh, image, o.forces, rs.tunnels);
     vertexMetrics.update(); // the vertices the edits made or moved: for the collision search, and the next step
     phase(it.phases.regularity);
@@ -386,6 +368,33 @@ IterationStats Evolution::step()
     std::vector<CollisionPair> contacts;
     auto collisions = findCollisions(mMesh, metric, co, &contacts);
     keepSettledPairsApart(mMesh, image, o.forces, level() > 0, collisions, contacts);
+    // The collision-safe step run beside is waited for only now: the collision search reads the
+    // mesh and writes nothing but its metric samples, so it fills the time the step may still
+    // take (and is made again with the regularity step after a step cut short). Its wait counts
+    // in the collision phase.
+    if (besides) {
+        beside.job.wait();
+        it.cutShort = beside.stats.shortened;
+        if (beside.stats.shortened == 0) {
+            const std::size_t n = beside.mesh.n_vertices(); // (the step's marks, with the edits')
+            for (std::size_t i = 0; i < n; ++i)
+                if (beside.mesh.property(edited, VertexHandle(int(i)))) mMesh.property(edited, VertexHandle(int(i))) = 1;
+        } else { // cut short: the regularity step and the collision search made again after it
+            mMesh = beside.mesh;
+            is = accountForShortenedStep(mMesh, mStepStart, mStepEnd, io);
+            vertexMetrics.update();
+            mRegularityCache.invalidate(); // (its grid saw faces that are gone)
+            mRegularityCache.setMode(regularityMode);
+            rs = enforceRegularity(mMesh, metric, ro, &mRegularityCache);
+            beside.pause = kBesidePause;
+            it.regularityRedone = true;
+            keepObjectNecks(mMesh, image, o.forces, rs.tunnels);
+            vertexMetrics.update();
+            contacts.clear();
+            collisions = findCollisions(mMesh, metric, co, &contacts);
+            keepSettledPairsApart(mMesh, image, o.forces, level() > 0, collisions, contacts);
+        }
+    }
     phase(it.phases.collisions);
     TopologyStats ts;
     holdTopology(collisions, contacts);
