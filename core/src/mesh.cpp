@@ -20,10 +20,12 @@ OpenMesh::VPropHandleT<OpenMesh::Vec3d> velocityProperty(Mesh& mesh)
 
 void markEdited(Mesh& mesh, std::initializer_list<VertexHandle> vertices)
 {
-    OpenMesh::VPropHandleT<char> edited;
-    if (!mesh.get_property_handle(edited, kEditedProperty)) return;
-    for (const VertexHandle v : vertices)
-        if (v.is_valid()) mesh.property(edited, v) = 1;
+    for (const char* name : {kEditedProperty, kGuardEditedProperty}) {
+        OpenMesh::VPropHandleT<char> edited;
+        if (!mesh.get_property_handle(edited, name)) continue;
+        for (const VertexHandle v : vertices)
+            if (v.is_valid()) mesh.property(edited, v) = 1;
+    }
 }
 
 namespace {

@@ -892,6 +892,7 @@ RegularityStats enforceRegularity(Mesh& mesh, const MetricField& metric, const R
     if (cache) cache->impl().lastEdits = std::size_t(stats.collapses + stats.flips);
     if (clear) return stats;
     mesh = before;
+    kept->valid = false; // (the grid saw the edits undone here)
     stats = regularize(mesh, metric, options, kept, nullptr);
     stats.editsRedone = true;
     if (cache) cache->impl().pause = kPauseAfterRedone;

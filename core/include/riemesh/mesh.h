@@ -62,6 +62,13 @@ OpenMesh::VPropHandleT<OpenMesh::Vec3d> velocityProperty(Mesh& mesh);
 /// garbage_collection() and SafeStepCache::invalidate().
 inline constexpr const char* kEditedProperty = "riemesh:edited";
 
+/// The same marks for the regularity step's intersection guard (RegularityCache in
+/// riemesh/regularity.h), which adds this property and clears the marks it has seen: set by
+/// split, collapse and flip (markEdited) beside kEditedProperty, cleared by their own reader.
+/// The same rule: any other edit of the connectivity marks its vertices or is followed by
+/// garbage_collection() and RegularityCache::invalidate().
+inline constexpr const char* kGuardEditedProperty = "riemesh:guard-edited";
+
 /// Sets the edit mark on `vertices` (see kEditedProperty) if the mesh has it.
 void markEdited(Mesh& mesh, std::initializer_list<VertexHandle> vertices);
 

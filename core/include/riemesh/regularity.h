@@ -46,10 +46,14 @@ struct RegularityStats {
 };
 
 /// What enforceRegularity keeps from one call to the next with intersectionFree: the grid of the
-/// faces its intersection guard looks up, each face entered with its box grown by a tenth of the
-/// mean face size and entered again only once it has left that box, instead of a grid of every
-/// face built anew at each call. The same edits either way. Call invalidate() when the mesh is
-/// renumbered (garbage collection) or replaced (a mesh with fewer faces than before is noticed).
+/// faces its intersection guard looks up, instead of a grid of every face built anew at each
+/// call. Each vertex has a reference position and each face is entered with the box of its
+/// corners' references grown by a tenth of the mean face size; a call gives the vertices that
+/// moved farther than that from their references (or whose faces split, collapse or flip changed:
+/// kGuardEditedProperty in riemesh/mesh.h) new ones and enters their faces again: a pass over the
+/// vertices, not over the faces. The same edits either way. Call invalidate() when the mesh is
+/// renumbered (garbage collection), replaced (a mesh with fewer vertices or faces than before is
+/// noticed) or its connectivity changed otherwise than by those edits.
 class RegularityCache {
 public:
     RegularityCache();

@@ -6,6 +6,7 @@
 #include "detail/triangle_intersection.h"
 
 #include <algorithm>
+#include <cmath>
 #include <atomic>
 #include <limits>
 
@@ -51,42 +52,95 @@ void IntersectionGuard::enter(FaceHandle f)
 {
     GuardGrid& g = *mKept;
     const std::size_t i = std::size_t(f.idx());
-    const Box6 box = faceBox(f);
+    const HalfedgeHandle h = mMesh.halfedge_handle(f);
+    const std::array<int, 3> c = {mMesh.from_vertex_handle(h).idx(), mMesh.to_vertex_handle(h).idx(),
+                                  mMesh.to_vertex_handle(mMesh.next_halfedge_handle(h)).idx()};
+    for (const int x : c) // (a vertex made since the references were given: its own now)
+        if (std::size_t(x) >= g.ref.size() || std::isnan(g.ref[std::size_t(x)].x())) renewReference(VertexHandle(x));
+    Box6 box;
+    for (int k = 0; k < 3; ++k) {
+        const double x0 = g.ref[std::size_t(c[0])][k], x1 = g.ref[std::size_t(c[1])][k], x2 = g.ref[std::size_t(c[2])][k];
+        box[k] = std::min({x0, x1, x2}) - g.margin;
+        box[k + 3] = std::max({x0, x1, x2}) + g.margin;
+    }
     if (i >= g.loose.size()) g.loose.resize(i + 1, kNoBox);
     Box6& loose = g.loose[i];
     if (contains(loose, box)) return;
-    loose = grownBy(box, g.margin);
+    loose = box;
     g.grid.insert(f.idx(), loose);
+}
+
+bool IntersectionGuard::renewReference(VertexHandle v)
+{
+    GuardGrid& g = *mKept;
+    const std::size_t i = std::size_t(v.idx());
+    constexpr double none = std::numeric_limits<double>::quiet_NaN();
+    if (i >= g.ref.size()) g.ref.resize(i + 1, Vec3::Constant(none));
+    const Vec3 p = position(mMesh, v);
+    Vec3& r = g.ref[i];
+    // (NaN, no reference yet: not within)
+    if (std::abs(p.x() - r.x()) <= g.margin && std::abs(p.y() - r.y()) <= g.margin && std::abs(p.z() - r.z()) <= g.margin)
+        return false;
+    r = p;
+    return true;
 }
 
 void IntersectionGuard::build()
 {
     mBuilt = true;
     GuardGrid& g = *mKept;
-    // Kept from an earlier step: the faces that left their boxes are entered again (one pass over
-    // the faces, a box each, where a build enters every face). Built anew when the mesh has grown
-    // or shrunk twofold since (the cells were sized for its faces then).
-    std::size_t live = 0;
-    if (g.valid && mMesh.n_faces() >= g.loose.size()) { // (fewer faces: renumbered, see RegularityCache)
-        for (auto f : mMesh.faces()) (void)f, ++live;
-        if (2 * live >= g.faces && live <= 2 * g.faces) {
-            // Which faces left their boxes, in parallel; those entered again in index order (the
-            // grid is not thread-safe). Head MRI, guarded: 13,000 faces a regularity step, 1.5 M
-            // instructions in the sequential part of the iteration.
-            const std::size_t nf = mMesh.n_faces();
-            g.loose.resize(nf, kNoBox); // (new faces)
-            g.left.assign(nf, 0);
-            forLive<FaceHandle>(mMesh, nf, 2048, [&](std::size_t i) {
-                g.left[i] = !contains(g.loose[i], faceBox(FaceHandle(int(i))));
-            });
-            for (std::size_t i = 0; i < nf; ++i)
-                if (g.left[i]) enter(FaceHandle(int(i)));
+    OpenMesh::VPropHandleT<char> marks;
+    if (!mMesh.get_property_handle(marks, kGuardEditedProperty)) {
+        mMesh.add_property(marks, kGuardEditedProperty);
+        g.valid = false; // (edits made before are not marked)
+    }
+    std::vector<char>& marked = mMesh.property(marks).data_vector();
+    constexpr double none = std::numeric_limits<double>::quiet_NaN();
+    // Kept from an earlier step: the vertices that left their references or whose faces an edit
+    // changed are given new references (a pass over the vertices, in parallel), then their faces
+    // are entered again (in index order: the grid is not thread-safe). Built anew when the mesh
+    // has grown or shrunk twofold since (the cells were sized for its faces then).
+    const std::size_t nv = mMesh.n_vertices(), nf = mMesh.n_faces();
+    if (g.valid && nv >= g.ref.size() && nf >= g.loose.size()) { // (fewer: renumbered, see RegularityCache)
+        g.ref.resize(nv, Vec3::Constant(none));
+        g.moved.assign(nv, 0);
+        const double t = g.margin;
+        forLive<VertexHandle>(mMesh, nv, 2048, [&](std::size_t i) {
+            const Vec3 p = position(mMesh, VertexHandle(int(i)));
+            const Vec3& r = g.ref[i];
+            g.moved[i] = marked[i] || !(std::abs(p.x() - r.x()) <= t && std::abs(p.y() - r.y()) <= t &&
+                                        std::abs(p.z() - r.z()) <= t);
+        });
+        std::size_t live = 0;
+        g.flagged.clear();
+        for (std::size_t i = 0; i < nv; ++i) {
+            if (mMesh.status(VertexHandle(int(i))).deleted()) continue;
+            ++live;
+            if (g.moved[i]) g.flagged.push_back(int(i));
+        }
+        if (2 * live >= g.vertices && live <= 2 * g.vertices) {
+            // Every new reference first, then the faces (a face entered before one of its corners
+            // had its new reference would keep a box around the old one).
+            for (const int i : g.flagged) {
+                g.ref[std::size_t(i)] = position(mMesh, VertexHandle(i));
+                marked[std::size_t(i)] = 0;
+            }
+            g.loose.resize(nf, kNoBox);
+            g.seen.resize(nf, 0u);
+            if (++g.stamp == 0) std::fill(g.seen.begin(), g.seen.end(), 0u), g.stamp = 1;
+            for (const int i : g.flagged)
+                for (auto f = mMesh.cvf_begin(VertexHandle(i)); f.is_valid(); ++f) {
+                    unsigned& seen = g.seen[std::size_t(f->idx())];
+                    if (seen == g.stamp) continue;
+                    seen = g.stamp;
+                    enter(*f);
+                }
             return;
         }
     }
     // The boxes in parallel, their extents summed in face order.
-    mBoxes.assign(mMesh.n_faces(), Box6{});
-    forLive<FaceHandle>(mMesh, mMesh.n_faces(), 2048, [&](std::size_t i) { mBoxes[i] = faceBox(FaceHandle(int(i))); });
+    mBoxes.assign(nf, Box6{});
+    forLive<FaceHandle>(mMesh, nf, 2048, [&](std::size_t i) { mBoxes[i] = faceBox(FaceHandle(int(i))); });
     double extent = 0;
     std::size_t count = 0;
     for (auto f : mMesh.faces()) {
@@ -99,13 +153,19 @@ void IntersectionGuard::build()
     // edit guard's instructions 1.11 G with a BoxGrid (each face in every cell its box meets,
     // cells of the mean extent) -> 0.61 G (cells of 1.5 / 3 mean extents: 0.75 / 0.66 G).
     // Faces entered with their boxes grown by a tenth of the mean extent (see GuardGrid): most
-    // faces of a surface at rest stay in them for many steps.
+    // vertices of a surface at rest stay that close to their references for many steps.
     const double mean = count ? extent / double(count) : 0.5;
-    g.grid.reset(count ? std::max(2.0 * mean, 1e-9) : 1.0, mMesh.n_faces());
+    g.grid.reset(count ? std::max(2.0 * mean, 1e-9) : 1.0, nf);
     g.margin = kGuardMargin * mean;
-    g.faces = count;
     g.valid = true;
-    g.loose.assign(mMesh.n_faces(), kNoBox);
+    g.ref.assign(nv, Vec3::Constant(none));
+    g.vertices = 0;
+    for (auto v : mMesh.vertices()) {
+        g.ref[std::size_t(v.idx())] = position(mMesh, v);
+        ++g.vertices;
+    }
+    std::fill(marked.begin(), marked.end(), 0);
+    g.loose.assign(nf, kNoBox);
     for (auto f : mMesh.faces()) {
         Box6& loose = g.loose[std::size_t(f.idx())];
         loose = grownBy(mBoxes[std::size_t(f.idx())], g.margin);
@@ -116,6 +176,7 @@ void IntersectionGuard::build()
 void IntersectionGuard::update(VertexHandle v)
 {
     if (!mBuilt) return; // built (or brought up to date) from the current mesh when first needed
+    renewReference(v);
     for (auto f = mMesh.cvf_begin(v); f.is_valid(); ++f) enter(*f);
 }
 

@@ -16,16 +16,23 @@
 
 namespace riemesh::detail {
 
-/// The guard's grid kept from one regularity step to the next (RegularityCache): each face is
-/// entered with its box grown by a margin, and entered again only once it has left that box, so
-/// that a step re-enters the faces that moved instead of all of them.
+/// The guard's grid kept from one regularity step to the next (RegularityCache). Each vertex has
+/// a reference position, each face is entered with the box of its corners' references grown by
+/// a margin: while every corner stays within the margin of its reference (on each axis), the
+/// face stays within that box. A step gives a vertex that has left its reference, or whose faces
+/// an edit changed (kGuardEditedProperty), a new reference and enters its faces again: a pass
+/// over the vertices instead of one over the faces and their boxes.
 struct GuardGrid {
     CentreGrid grid;
     std::vector<Box6> loose; ///< by face index: the box the face was entered with
+    std::vector<Vec3> ref;   ///< by vertex index: its reference (NaN: none yet)
     double margin = 0;       ///< world units
-    std::size_t faces = 0;   ///< live faces when the grid was built
+    std::size_t vertices = 0; ///< live vertices when the grid was built
     bool valid = false;
-    std::vector<char> left;  ///< (scratch: by face index, left its box since it was entered)
+    std::vector<char> moved;   ///< (scratch: by vertex index, to be given a new reference)
+    std::vector<int> flagged;  ///< (scratch: those vertices)
+    std::vector<unsigned> seen; ///< (scratch: by face index, the pass that entered it last)
+    unsigned stamp = 0;
 };
 
 class IntersectionGuard {
@@ -34,7 +41,7 @@ public:
     /// units) to a face they share no vertex with (trianglesCloserThan, riemesh/ccd.h). With
     /// `kept`, the grid of the faces is kept there for the next guard (see GuardGrid), else built
     /// for this one.
-    explicit IntersectionGuard(const Mesh& mesh, double minSeparation = 0, GuardGrid* kept = nullptr)
+    explicit IntersectionGuard(Mesh& mesh, double minSeparation = 0, GuardGrid* kept = nullptr)
         : mMesh(mesh), mMinSeparation(minSeparation), mKept(kept ? kept : &mOwn)
     {
     }
@@ -45,7 +52,8 @@ public:
     /// Flipping e leaves no two faces crossing.
     bool isFlipSafe(EdgeHandle e);
     /// After an edit that changed the faces around v (a split, a collapse kept v, a flip made v a
-    /// corner of both new faces): enters them with their new boxes.
+    /// corner of both new faces): enters them with their new boxes (v's reference renewed if it
+    /// moved off it).
     void update(VertexHandle v);
     /// After edits made without asking (see RegularityOptions::checkEditsTogether): the live faces
     /// around the vertices `around` cross no face and come no closer than minSeparation to a face
@@ -63,8 +71,10 @@ private:
         std::vector<int> near;
     };
     void build();
-    /// Enters face f again if it has left the box it was entered with (or was never entered).
+    /// Enters face f with the box of its corners' references, unless the box it has holds that.
     void enter(FaceHandle f);
+    /// Gives v its position as reference if it is off its reference (or has none); true if so.
+    bool renewReference(VertexHandle v);
     /// One of `made` (new triangles) meets another or a live face of the mesh, but for those
     /// skip(face index, its corners) leaves out.
     template <class Skip>
@@ -72,7 +82,7 @@ private:
     Box6 faceBox(FaceHandle f) const;
     Triangle triangle(FaceHandle f) const;
 
-    const Mesh& mMesh;
+    Mesh& mMesh; ///< (written: the guard's edit marks it has seen are cleared)
     double mMinSeparation = 0;
     GuardGrid mOwn;
     GuardGrid* mKept;
