@@ -586,9 +586,9 @@ public:
                         for (const std::uint32_t stop = std::min(end, i + 32); i < stop; ++i) {
                             const Entry& e = mEntries[i];
                             hits[count] = i;
-                            count += (e.key - first <= span) & (e.item > after) & (qf[0] <= e.box[3]) &
-                                     (e.box[0] <= qf[3]) & (qf[1] <= e.box[4]) & (e.box[1] <= qf[4]) &
-                                     (qf[2] <= e.box[5]) & (e.box[2] <= qf[5]);
+                            count += int(e.key - first <= span) & int(e.item > after) & int(qf[0] <= e.box[3]) &
+                                     int(e.box[0] <= qf[3]) & int(qf[1] <= e.box[4]) & int(e.box[1] <= qf[4]) &
+                                     int(qf[2] <= e.box[5]) & int(e.box[2] <= qf[5]);
                         }
                         for (int h = 0; h < count; ++h) {
                             const Entry& e = mEntries[hits[h]];
@@ -714,9 +714,9 @@ private:
             for (const std::size_t stop = std::min(j1, j + 32); j < stop; ++j) {
                 const Entry& y = mEntries[j];
                 hits[count] = std::uint32_t(j);
-                count += (x.key == y.key) & (((x.lowest | y.lowest) & 7) == 7) & (x.box[0] <= y.box[3]) &
-                         (y.box[0] <= x.box[3]) & (x.box[1] <= y.box[4]) & (y.box[1] <= x.box[4]) &
-                         (x.box[2] <= y.box[5]) & (y.box[2] <= x.box[5]);
+                count += int(x.key == y.key) & int(((x.lowest | y.lowest) & 7) == 7) & int(x.box[0] <= y.box[3]) &
+                         int(y.box[0] <= x.box[3]) & int(x.box[1] <= y.box[4]) & int(y.box[1] <= x.box[4]) &
+                         int(x.box[2] <= y.box[5]) & int(y.box[2] <= x.box[5]);
             }
             for (int h = 0; h < count; ++h) f(mEntries[hits[h]]);
         }
