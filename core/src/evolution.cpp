@@ -384,18 +384,26 @@ IterationStats Evolution::step()
         ro.delta = c * o.delta;
         ro.zeta = o.zeta / c;
     }
-    RegularityStats rs = enforceRegularity(mMesh, metric, ro, &mRegularityCache);
-    keepObjectNecks(mMesh, image, o.forces, rs.tunnels);
-    vertexMetrics.update(); // the vertices the edits made or moved: for the collision search, and the next step
+    RegularityStats rs;
+    auto regularize = [&] {
+        rs = enforceRegularity(mMesh, metric, ro, &mRegularityCache);
+        keepObjectNecks(mMesh, image, o.forces, rs.tunnels);
+        vertexMetrics.update(); // the vertices the edits made or moved: for the collision search, and the next step
+    };
+    regularize();
     phase(it.phases.regularity);
 
     CollisionOptions co;
     co.delta = o.delta;
     co.zeta = o.zeta;
     co.vmax = vmax;
-    std::vector<CollisionPair> contacts;
-    auto collisions = findCollisions(mMesh, metric, co, &contacts);
-    keepSettledPairsApart(mMesh, image, o.forces, level() > 0, collisions, contacts);
+    std::vector<CollisionPair> contacts, collisions;
+    auto searchCollisions = [&] {
+        contacts.clear();
+        collisions = findCollisions(mMesh, metric, co, &contacts);
+        keepSettledPairsApart(mMesh, image, o.forces, level() > 0, collisions, contacts);
+    };
+    searchCollisions();
     // The collision-safe step run beside is waited for only now: the collision search reads the
     // mesh and writes nothing but its metric samples, so it fills the time the step may still
     // take (and is made again with the regularity step after a step cut short). Its wait counts
@@ -416,14 +424,10 @@ IterationStats Evolution::step()
             vertexMetrics.update();
             mRegularityCache.invalidate(); // (its grid saw faces that are gone)
             mRegularityCache.setMode(regularityMode);
-            rs = enforceRegularity(mMesh, metric, ro, &mRegularityCache);
+            regularize();
+            searchCollisions();
             beside.pause = kBesidePause;
             it.regularityRedone = true;
-            keepObjectNecks(mMesh, image, o.forces, rs.tunnels);
-            vertexMetrics.update();
-            contacts.clear();
-            collisions = findCollisions(mMesh, metric, co, &contacts);
-            keepSettledPairsApart(mMesh, image, o.forces, level() > 0, collisions, contacts);
         }
     }
     phase(it.phases.collisions);

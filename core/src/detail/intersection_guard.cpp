@@ -27,6 +27,12 @@ bool contains(const Box6& outer, const Box6& inner)
            inner[4] <= outer[4] && inner[5] <= outer[5];
 }
 
+/// p within `margin` of its reference r on every axis (false for a NaN reference: none yet).
+bool withinReference(const Vec3& p, const Vec3& r, double margin)
+{
+    return std::abs(p.x() - r.x()) <= margin && std::abs(p.y() - r.y()) <= margin && std::abs(p.z() - r.z()) <= margin;
+}
+
 Box6 grownBy(Box6 box, double margin)
 {
     for (int k = 0; k < 3; ++k) box[k] -= margin, box[k + 3] += margin;
@@ -77,11 +83,8 @@ bool IntersectionGuard::renewReference(VertexHandle v)
     constexpr double none = std::numeric_limits<double>::quiet_NaN();
     if (i >= g.ref.size()) g.ref.resize(i + 1, Vec3::Constant(none));
     const Vec3 p = position(mMesh, v);
-    Vec3& r = g.ref[i];
-    // (NaN, no reference yet: not within)
-    if (std::abs(p.x() - r.x()) <= g.margin && std::abs(p.y() - r.y()) <= g.margin && std::abs(p.z() - r.z()) <= g.margin)
-        return false;
-    r = p;
+    if (withinReference(p, g.ref[i], g.margin)) return false;
+    g.ref[i] = p;
     return true;
 }
 
@@ -104,12 +107,8 @@ void IntersectionGuard::build()
     if (g.valid && nv >= g.ref.size() && nf >= g.loose.size()) { // (fewer: renumbered, see RegularityCache)
         g.ref.resize(nv, Vec3::Constant(none));
         g.moved.assign(nv, 0);
-        const double t = g.margin;
         forLive<VertexHandle>(mMesh, nv, 2048, [&](std::size_t i) {
-            const Vec3 p = position(mMesh, VertexHandle(int(i)));
-            const Vec3& r = g.ref[i];
-            g.moved[i] = marked[i] || !(std::abs(p.x() - r.x()) <= t && std::abs(p.y() - r.y()) <= t &&
-                                        std::abs(p.z() - r.z()) <= t);
+            g.moved[i] = marked[i] || !withinReference(position(mMesh, VertexHandle(int(i))), g.ref[i], g.margin);
         });
         std::size_t live = 0;
         g.flagged.clear();
