@@ -132,6 +132,19 @@ TEST_CASE("ccd: the edit guard's separating plane proves only what the exact tes
             CHECK_FALSE(close);
         }
     }
+    // Two faces on a shared edge shorter than r, open flat: the edges from the free corners to the
+    // edge's two ends come within its length of each other, however far the corners are from the
+    // plane between the faces (the bound on those edges must give way to their distance); with r
+    // well below the edge's length, the bound settles the pair.
+    {
+        const std::array<Vec3, 3> a = {Vec3(0, 0, 0), Vec3(0.01, 0, 0), Vec3(0.005, 1, 0)};
+        const std::array<Vec3, 3> b = {Vec3(0, 0, 0), Vec3(0.01, 0, 0), Vec3(0.005, -1, 0)};
+        const std::array<int, 3> ia = {0, 1, 2}, ib = {0, 1, 3};
+        CHECK(trianglesCloserThan(ia, a, ib, b, 0.05));
+        CHECK_FALSE(detail::separatedBeyondShared(ia, corners(a).data(), ib, corners(b).data(), 0.05));
+        CHECK_FALSE(trianglesCloserThan(ia, a, ib, b, 1e-4));
+        CHECK(detail::separatedBeyondShared(ia, corners(a).data(), ib, corners(b).data(), 1e-4));
+    }
     // Both kinds were met many times, and the shortcut settled most pairs.
     MESSAGE("settled " << settled << " of " << asked << "; " << unsafe << " crossing or closer than r");
     CHECK(unsafe > asked / 20);

@@ -218,7 +218,7 @@ bool separatedBeyondShared(const std::array<int, 3>& ia, const double* const a[3
     }
     double scale = 0; // the coordinates' magnitude, for the rounding bound
     for (int i = 0; i < 3; ++i)
-        for (int k = 0; k < 3; ++k) scale = std::max({scale, std::abs(a[i][k]), std::abs(b[i][k])});
+        for (int k = 0; k < 3; ++k) scale = std::max(scale, std::max(std::abs(a[i][k]), std::abs(b[i][k])));
     if (shared == 0) {
         const V ca = (at(a[0]) + at(a[1]) + at(a[2])) / 3.0, cb = (at(b[0]) + at(b[1]) + at(b[2])) / 3.0;
         m = ca - cb;
@@ -251,20 +251,29 @@ bool separatedBeyondShared(const std::array<int, 3>& ia, const double* const a[3
     }
     const double len = m.norm();
     if (!(len > 0) || !std::isfinite(len)) return false;
-    m /= len;
     // Rounding of the margins (a few operations on coordinates of magnitude `scale`), with room.
-    const double need = r * (1 + 1e-9) + 1e-12 * (scale + 1);
+    // The margins along m as it is, against need times its length (m is not made unit).
+    const double need = r * (1 + 1e-9) + 1e-12 * (scale + 1), needLen = need * len;
+    double height[3] = {0, 0, 0}; // (a's free corners' margins, in units of len: for the edges below)
     for (int i = 0; i < 3; ++i)
-        if (sa[i] < 0 && !(m.dot(at(a[i]) - origin) > need)) return false;
+        if (sa[i] < 0 && !((height[i] = m.dot(at(a[i]) - origin)) > needLen)) return false;
+    double heightB = 0;
     for (int j = 0; j < 3; ++j)
-        if (!inB[j] && !(-m.dot(at(b[j]) - origin) > need)) return false;
+        if (!inB[j] && !((heightB = -m.dot(at(b[j]) - origin)) > needLen)) return false;
     if (shared == 2) {
         // Each edge from a free corner to one end of the shared edge, against the one from the
         // other free corner to the other end: they share no vertex, and both reach the plane (at
-        // different points), so their distance is measured.
+        // different points). A point of the first at a fraction t of the way from its end on the
+        // plane is t ha from the plane (ha: the free corner's margin), one of the second s hb:
+        // closer than `need` only where t < need / ha and s < need / hb, hence at least
+        // L - need (la / ha + lb / hb) apart (L: the shared edge's length; la, lb: the edges').
+        // That bound (halved, for its rounding) settles most; the others are measured.
+        const double L = (at(a[(free + 1) % 3]) - at(a[(free + 2) % 3])).norm();
         for (int k = 1; k <= 2; ++k) {
             const int ea = (free + k) % 3;       // a's corner at one end of the shared edge
             const int eb = (free + 3 - k) % 3;   // a's corner at the other end: b's corner sa[eb]
+            const double la = (at(a[free]) - at(a[ea])).norm(), lb = (at(b[freeB]) - at(b[sa[eb]])).norm();
+            if (0.5 * L > need * (1 + len * (la / height[free] + lb / heightB))) continue;
             const double d2 = segmentSegmentDistanceSquared(at(a[free]), at(a[ea]), at(b[freeB]), at(b[sa[eb]]));
             if (!(std::sqrt(d2) > need)) return false;
         }
