@@ -24,6 +24,7 @@
 
 #include "detail/edge_guards.h"
 #include "detail/intersection_guard.h"
+#include "detail/regularize.h"
 #include "detail/parallel.h"
 
 #include <algorithm>
@@ -83,10 +84,10 @@ bool shorterFirst(const QueuedEdge& x, const QueuedEdge& y) { return x.priority 
 class Regularizer {
 public:
     /// With `made` (options.intersectionFree, the edits made without asking the guard, see
-    /// enforceRegularity): the vertices whose faces the collapses and flips made or moved are
-    /// noted there, each once.
+    /// enforceRegularity): the faces the collapses and flips made or moved are noted there (the
+    /// vertices around which they all are, each once; each flip's two faces).
     Regularizer(Mesh& mesh, const MetricField& metric, const RegularityOptions& options, RegularityStats& stats,
-                detail::GuardGrid* kept, std::vector<int>* made = nullptr)
+                detail::GuardGrid* kept, detail::MadeFaces* made = nullptr)
         : mMesh(mesh), mMetric(metric), mVertexMetrics(mesh, metric), mStats(stats), mLo(options.delta),
           mHi(options.zeta * options.delta), mMade(made)
     {
@@ -251,10 +252,13 @@ public:
     }
 
     /// Notes v among the vertices whose faces the edits made (see the constructor). A face made or
-    /// moved by a collapse or a flip has a noted corner (the kept vertex; a corner of both new
-    /// faces), and keeps one through later edits: a collapse notes the vertex its faces now end at,
-    /// and a split of an edge of such a face notes the new vertex, a corner of both halves (the
-    /// halves of any other face lie in it, which the edits did not make).
+    /// moved by a collapse has a noted corner (the kept vertex), a face a flip made is noted itself
+    /// (noteFlip), and a face made from either by later edits is noted again: a collapse notes the
+    /// vertex its faces now end at, a flip its two faces, and a split of an edge of a noted face
+    /// (or of a face with a noted corner) notes the new vertex, a corner of both halves (the
+    /// halves of any other face lie in it, which the edits did not make). Only a flip's two faces
+    /// are noted, not the faces around a corner of both: head MRI, guarded, a third of the faces
+    /// checked after the flips (the rest of those stars are as they were).
     void noteMade(VertexHandle v)
     {
         if (!mMade) return;
@@ -262,12 +266,25 @@ public:
         if (i >= mIsMade.size()) mIsMade.resize(std::max(i + 1, std::size_t(mMesh.n_vertices())), 0);
         if (mIsMade[i]) return;
         mIsMade[i] = 1;
-        mMade->push_back(v.idx());
+        mMade->vertices.push_back(v.idx());
     }
     bool isMade(VertexHandle v) const
     {
         const std::size_t i = std::size_t(v.idx());
         return i < mIsMade.size() && mIsMade[i];
+    }
+    /// Notes the two faces a flip made.
+    void noteFlip(FaceHandle f, FaceHandle g)
+    {
+        if (!mMade) return;
+        if (mIsMadeFace.size() < mMesh.n_faces()) mIsMadeFace.resize(mMesh.n_faces(), 0);
+        mIsMadeFace[std::size_t(f.idx())] = mIsMadeFace[std::size_t(g.idx())] = 1;
+        mMade->flipped.push_back({f.idx(), g.idx()});
+    }
+    bool isMade(FaceHandle f) const
+    {
+        const std::size_t i = std::size_t(f.idx());
+        return f.is_valid() && i < mIsMadeFace.size() && mIsMadeFace[i];
     }
 
     void clearTouched()
@@ -320,10 +337,11 @@ public:
             const Vec3 mid = 0.5 * (position(mMesh, mMesh.from_vertex_handle(h)) +
                                     position(mMesh, mMesh.to_vertex_handle(h)));
             if (!splitKeepsFacesValid(h, mid)) continue; // stays long: counted in tooLong
+            const HalfedgeHandle o = mMesh.opposite_halfedge_handle(h);
             const bool inMade = mMade && (isMade(mMesh.from_vertex_handle(h)) || isMade(mMesh.to_vertex_handle(h)) ||
                                           isMade(mMesh.to_vertex_handle(mMesh.next_halfedge_handle(h))) ||
-                                          isMade(mMesh.to_vertex_handle(mMesh.next_halfedge_handle(
-                                              mMesh.opposite_halfedge_handle(h)))));
+                                          isMade(mMesh.to_vertex_handle(mMesh.next_halfedge_handle(o))) ||
+                                          isMade(mMesh.face_handle(h)) || isMade(mMesh.face_handle(o)));
             const VertexHandle w = split(mMesh, e, mid);
             if (!w.is_valid()) continue;
             ++splits;
@@ -455,7 +473,7 @@ public:
         const VertexHandle b = mMesh.to_vertex_handle(mMesh.next_halfedge_handle(o));
         detail::flipUnchecked(mMesh, e);
         if (mGuard) mGuard->update(a);
-        noteMade(a); // (a corner of both new faces)
+        noteFlip(mMesh.face_handle(h), mMesh.face_handle(o));
         --mValence[u.idx()];
         --mValence[v.idx()];
         ++mValence[a.idx()];
@@ -783,8 +801,9 @@ private:
     std::vector<int> mSpeculated;
     bool mSpeculate = true;
     std::unique_ptr<detail::IntersectionGuard> mGuard; ///< options.intersectionFree, edits asked in turn
-    std::vector<int>* mMade = nullptr;                 ///< (see the constructor)
+    detail::MadeFaces* mMade = nullptr;                ///< (see the constructor)
     std::vector<char> mIsMade;                         ///< by vertex idx(): in mMade
+    std::vector<char> mIsMadeFace;                     ///< by face idx(): noted by a flip (noteFlip)
 };
 
 } // namespace
@@ -825,7 +844,7 @@ constexpr int kPauseAfterRedone = 8;
 /// The split, collapse and flip passes (see enforceRegularity), the collapses and flips asked of
 /// the guard in turn, or, with `made`, made without asking and their vertices noted there.
 RegularityStats regularize(Mesh& mesh, const MetricField& metric, const RegularityOptions& options,
-                           detail::GuardGrid* kept, std::vector<int>* made)
+                           detail::GuardGrid* kept, detail::MadeFaces* made)
 {
     RegularityStats stats;
     Regularizer regularizer(mesh, metric, options, stats, kept, made);
@@ -857,6 +876,12 @@ RegularityStats regularize(Mesh& mesh, const MetricField& metric, const Regulari
 
 } // namespace
 
+RegularityStats detail::regularizeNotingEdits(Mesh& mesh, const MetricField& metric, const RegularityOptions& options,
+                                              GuardGrid* kept, MadeFaces& made)
+{
+    return regularize(mesh, metric, options, kept, &made);
+}
+
 RegularityStats enforceRegularity(Mesh& mesh, const MetricField& metric, const RegularityOptions& options,
                                   RegularityCache* cache)
 {
@@ -886,8 +911,8 @@ RegularityStats enforceRegularity(Mesh& mesh, const MetricField& metric, const R
     std::unique_ptr<Mesh> ownBefore;
     Mesh& before = cache ? cache->impl().before : *(ownBefore = std::make_unique<Mesh>());
     before = mesh;
-    std::vector<int> made;
-    RegularityStats stats = regularize(mesh, metric, options, kept, &made);
+    detail::MadeFaces made;
+    RegularityStats stats = detail::regularizeNotingEdits(mesh, metric, options, kept, made);
     const bool clear = detail::IntersectionGuard(mesh, options.minSeparation, kept).facesAroundAreClear(made);
     if (cache) cache->impl().lastEdits = std::size_t(stats.collapses + stats.flips);
     if (clear) return stats;

@@ -7,6 +7,8 @@
 #include "riemesh/regularity.h"
 #include "riemesh/self_intersection.h"
 
+#include "detail/regularize.h" // private to the core (its directory is on this suite's include path)
+
 #include <doctest/doctest.h>
 
 #include <algorithm>
@@ -584,4 +586,99 @@ TEST_CASE("regularity: with a cache, the calls right after one made again ask ea
     }
     REQUIRE(!redoneAt.empty());
     for (std::size_t k = 1; k < redoneAt.size(); ++k) CHECK(redoneAt[k] - redoneAt[k - 1] > 8);
+}
+
+TEST_CASE("regularity: the edits made without asking the guard note every face they made or moved")
+{
+    // The check of edits together (intersection-free, see enforceRegularity) tests only the faces
+    // the edits noted: those around the vertices collapses kept (and splits of noted faces made),
+    // and the two faces of each flip. Every other face after the call must be one of before (the
+    // same corners in the same places) or lie in one (a half of a split face no edit made). The
+    // sphere in a sphere refined and coarsened at random, three passes a call: splits after the
+    // flips and collapses of earlier passes, on their faces too.
+    const EuclideanMetric metric;
+    Mesh mesh = sphereInSphere();
+    std::mt19937 rng(2031);
+    std::uniform_real_distribution<double> pick(0.0, 1.0);
+    RegularityOptions options;
+    options.maxPasses = 3;
+    options.intersectionFree = true;
+    options.minSeparation = 1e-4;
+    struct Face {
+        std::array<int, 3> ids;
+        std::array<Vec3, 3> p;
+    };
+    auto faceOf = [&](FaceHandle f) {
+        Face x;
+        int k = 0;
+        for (auto v = mesh.cfv_begin(f); v.is_valid(); ++v, ++k) {
+            x.ids[std::size_t(k)] = v->idx();
+            x.p[std::size_t(k)] = position(mesh, *v);
+        }
+        return x;
+    };
+    // q lies in triangle t (within round-off of its plane and its sides).
+    auto inTriangle = [](const Vec3& q, const std::array<Vec3, 3>& t) {
+        const Vec3 n = (t[1] - t[0]).cross(t[2] - t[0]);
+        const double area2 = n.squaredNorm();
+        if (!(area2 > 0) || std::abs(n.dot(q - t[0])) > 1e-9 * std::sqrt(area2)) return false;
+        for (int k = 0; k < 3; ++k) {
+            const Vec3& a = t[std::size_t(k)];
+            const Vec3& b = t[std::size_t((k + 1) % 3)];
+            if ((b - a).cross(q - a).dot(n) < -1e-9 * area2) return false;
+        }
+        return true;
+    };
+    std::size_t flips = 0, splits = 0, collapses = 0, inOld = 0, noted = 0;
+    for (int it = 0; it < 30; ++it) {
+        options.delta = 0.03 + 0.15 * pick(rng);
+        turnAndJitter(rng, {&mesh});
+        std::vector<Face> before;
+        std::vector<std::vector<std::size_t>> facesAt(mesh.n_vertices());
+        for (auto f : mesh.faces()) {
+            before.push_back(faceOf(f));
+            for (const int id : before.back().ids) facesAt[std::size_t(id)].push_back(before.size() - 1);
+        }
+        detail::MadeFaces made;
+        detail::GuardGrid kept;
+        const RegularityStats stats = detail::regularizeNotingEdits(mesh, metric, options, &kept, made);
+        flips += std::size_t(stats.flips);
+        splits += std::size_t(stats.splits);
+        collapses += std::size_t(stats.collapses);
+        CHECK(made.flipped.size() == std::size_t(stats.flips));
+        std::vector<char> around(mesh.n_vertices(), 0), flipped(mesh.n_faces(), 0);
+        for (const int v : made.vertices) around[std::size_t(v)] = 1;
+        for (const auto& pair : made.flipped)
+            for (const int f : pair) flipped[std::size_t(f)] = 1;
+        CAPTURE(it);
+        for (auto f : mesh.faces()) {
+            const Face x = faceOf(f);
+            if (flipped[std::size_t(f.idx())] ||
+                std::any_of(x.ids.begin(), x.ids.end(), [&](int v) { return around[std::size_t(v)] != 0; })) {
+                ++noted;
+                continue;
+            }
+            // Held by a face of before: one at a corner of it, or any (splits of splits: no corner
+            // of before).
+            auto holds = [&](std::size_t g) {
+                return std::all_of(x.p.begin(), x.p.end(), [&](const Vec3& q) { return inTriangle(q, before[g].p); });
+            };
+            bool held = false, oldCorner = false;
+            for (const int id : x.ids)
+                if (std::size_t(id) < facesAt.size()) {
+                    oldCorner = true;
+                    for (const std::size_t g : facesAt[std::size_t(id)]) held = held || holds(g);
+                }
+            for (std::size_t g = 0; !oldCorner && !held && g < before.size(); ++g) held = holds(g);
+            CHECK(held);
+            inOld += held;
+        }
+        // (No mesh check: the edits, made without asking, may cut chords through the other sphere.)
+        if (it % 8 == 7) mesh.garbage_collection();
+    }
+    MESSAGE(splits << " splits, " << collapses << " collapses, " << flips << " flips; faces after: " << noted << " noted, "
+                   << inOld << " in a face of before");
+    CHECK(splits > 1000);
+    CHECK(collapses > 1000);
+    CHECK(flips > 1000);
 }

@@ -269,30 +269,40 @@ bool IntersectionGuard::crosses(const std::vector<Triangle>& made, Scratch& scra
     return false;
 }
 
-bool IntersectionGuard::facesAroundAreClear(const std::vector<int>& around)
+bool IntersectionGuard::facesAroundAreClear(const MadeFaces& made)
 {
     if (!mBuilt) build();
-    // Each live face around them once, owned by the first of `around` among its corners (the
-    // vertex k's faces: mOwned[mStart[k], mStart[k + 1])).
+    // Each live face once, owned by the first group it belongs to: the faces around each vertex of
+    // made.vertices, then each pair of made.flipped (the group k's faces: mOwned[mStart[k],
+    // mStart[k + 1])).
+    const std::vector<int>& around = made.vertices;
+    const std::size_t groups = around.size() + made.flipped.size();
     mOwner.assign(mMesh.n_faces(), -1);
-    mStart.assign(around.size() + 1, 0);
+    mStart.assign(groups + 1, 0);
     mOwned.clear();
+    auto own = [&](int f, std::size_t k) {
+        int& owner = mOwner[std::size_t(f)];
+        if (owner >= 0) return;
+        owner = int(k);
+        mOwned.push_back(f);
+    };
     for (std::size_t k = 0; k < around.size(); ++k) {
         mStart[k] = mOwned.size();
         const VertexHandle v(around[k]);
         if (std::size_t(around[k]) >= mMesh.n_vertices() || mMesh.status(v).deleted()) continue;
-        for (auto f = mMesh.cvf_begin(v); f.is_valid(); ++f) {
-            int& owner = mOwner[std::size_t(f->idx())];
-            if (owner >= 0) continue;
-            owner = int(k);
-            mOwned.push_back(f->idx());
-        }
+        for (auto f = mMesh.cvf_begin(v); f.is_valid(); ++f) own(f->idx(), k);
     }
-    mStart[around.size()] = mOwned.size();
-    // Each vertex's faces as the made triangles of an edit: against each other, and against the
-    // faces near them but their own and those of a vertex before it (that one tested the pair).
+    for (std::size_t j = 0; j < made.flipped.size(); ++j) {
+        const std::size_t k = around.size() + j;
+        mStart[k] = mOwned.size();
+        for (const int f : made.flipped[j])
+            if (std::size_t(f) < mMesh.n_faces() && !mMesh.status(FaceHandle(f)).deleted()) own(f, k);
+    }
+    mStart[groups] = mOwned.size();
+    // Each group's faces as the made triangles of an edit: against each other, and against the
+    // faces near them but their own and those of a group before it (that one tested the pair).
     std::atomic<bool> crossing{false};
-    detail::parallelForChunks(0, around.size(), 16, [&](std::size_t k0, std::size_t k1) {
+    detail::parallelForChunks(0, groups, 16, [&](std::size_t k0, std::size_t k1) {
         static thread_local std::vector<Triangle> made;
         static thread_local Scratch scratch;
         for (std::size_t k = k0; k < k1 && !crossing.load(std::memory_order_relaxed); ++k) {

@@ -22,6 +22,20 @@ namespace riemesh::detail {
 /// face stays within that box. A step gives a vertex that has left its reference, or whose faces
 /// an edit changed (kGuardEditedProperty), a new reference and enters its faces again: a pass
 /// over the vertices instead of one over the faces and their boxes.
+/// What a regularity step's edits made without asking the guard (see
+/// IntersectionGuard::facesAroundAreClear): the vertices all of whose faces an edit made or moved
+/// (a collapse's kept vertex, the new vertex of a split of such a face), and the two faces each
+/// flip made.
+struct MadeFaces {
+    std::vector<int> vertices;
+    std::vector<std::array<int, 2>> flipped;
+    void clear()
+    {
+        vertices.clear();
+        flipped.clear();
+    }
+};
+
 struct GuardGrid {
     CentreGrid grid;
     std::vector<Box6> loose; ///< by face index: the box the face was entered with
@@ -56,9 +70,10 @@ public:
     /// moved off it).
     void update(VertexHandle v);
     /// After edits made without asking (see RegularityOptions::checkEditsTogether): the live faces
-    /// around the vertices `around` cross no face and come no closer than minSeparation to a face
-    /// they share no vertex with (the tests of isCollapseSafe, each pair once), in parallel.
-    bool facesAroundAreClear(const std::vector<int>& around);
+    /// around the vertices made.vertices and the live faces of made.flipped cross no face and come
+    /// no closer than minSeparation to a face they share no vertex with (the tests of
+    /// isCollapseSafe, each pair once), in parallel.
+    bool facesAroundAreClear(const MadeFaces& made);
 
 private:
     struct Triangle {
