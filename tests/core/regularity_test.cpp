@@ -595,8 +595,13 @@ TEST_CASE("regularity: the edits made without asking the guard note every face t
     // and the two faces of each flip. Every other face after the call must be one of before (the
     // same corners in the same places) or lie in one (a half of a split face no edit made). The
     // sphere in a sphere refined and coarsened at random, three passes a call: splits after the
-    // flips and collapses of earlier passes, on their faces too.
-    const EuclideanMetric metric;
+    // flips and collapses of earlier passes, on their faces too. Euclidean and anisotropic metrics
+    // in turn (skinny faces: splits refused, then made once a flip changed a face).
+    const EuclideanMetric euclidean;
+    const ConstantMetric flat(Vec3(1, 1, 9).asDiagonal().toDenseMatrix());
+    const ConstantMetric tilted(metricFromEigen(Eigen::AngleAxisd(0.7, Vec3(1, 2, 3).normalized()).toRotationMatrix(),
+                                                Vec3(1, 4, 16)));
+    const MetricField* metrics[3] = {&euclidean, &flat, &tilted};
     Mesh mesh = sphereInSphere();
     std::mt19937 rng(2031);
     std::uniform_real_distribution<double> pick(0.0, 1.0);
@@ -630,8 +635,9 @@ TEST_CASE("regularity: the edits made without asking the guard note every face t
         return true;
     };
     std::size_t flips = 0, splits = 0, collapses = 0, inOld = 0, noted = 0;
-    for (int it = 0; it < 30; ++it) {
-        options.delta = 0.03 + 0.15 * pick(rng);
+    for (int it = 0; it < 60; ++it) {
+        const MetricField& metric = *metrics[it % 3];
+        options.delta = (0.03 + 0.15 * pick(rng)) * (it % 3 == 0 ? 1.0 : 2.5);
         turnAndJitter(rng, {&mesh});
         std::vector<Face> before;
         std::vector<std::vector<std::size_t>> facesAt(mesh.n_vertices());
