@@ -842,7 +842,8 @@ namespace {
 constexpr int kPauseAfterRedone = 8;
 
 /// The split, collapse and flip passes (see enforceRegularity), the collapses and flips asked of
-/// the guard in turn, or, with `made`, made without asking and their vertices noted there.
+/// the guard in turn, or, with `made`, made without asking and the faces they made noted there
+/// (see detail::MadeFaces).
 RegularityStats regularize(Mesh& mesh, const MetricField& metric, const RegularityOptions& options,
                            detail::GuardGrid* kept, detail::MadeFaces* made)
 {

@@ -596,7 +596,8 @@ TEST_CASE("regularity: the edits made without asking the guard note every face t
     // same corners in the same places) or lie in one (a half of a split face no edit made). The
     // sphere in a sphere refined and coarsened at random, three passes a call: splits after the
     // flips and collapses of earlier passes, on their faces too. Euclidean and anisotropic metrics
-    // in turn (skinny faces: splits refused, then made once a flip changed a face).
+    // in turn. (A split of an edge of a face a flip made, in a later pass of the same call, is
+    // reached by none of these calls: that rule of noteMade is not tested here.)
     const EuclideanMetric euclidean;
     const ConstantMetric flat(Vec3(1, 1, 9).asDiagonal().toDenseMatrix());
     const ConstantMetric tilted(metricFromEigen(Eigen::AngleAxisd(0.7, Vec3(1, 2, 3).normalized()).toRotationMatrix(),

@@ -303,14 +303,14 @@ bool IntersectionGuard::facesAroundAreClear(const MadeFaces& made)
     // faces near them but their own and those of a group before it (that one tested the pair).
     std::atomic<bool> crossing{false};
     detail::parallelForChunks(0, groups, 16, [&](std::size_t k0, std::size_t k1) {
-        static thread_local std::vector<Triangle> made;
+        static thread_local std::vector<Triangle> triangles; // (the group's faces)
         static thread_local Scratch scratch;
         for (std::size_t k = k0; k < k1 && !crossing.load(std::memory_order_relaxed); ++k) {
             if (mStart[k] == mStart[k + 1]) continue;
-            made.clear();
-            for (std::size_t i = mStart[k]; i < mStart[k + 1]; ++i) made.push_back(triangle(FaceHandle(mOwned[i])));
+            triangles.clear();
+            for (std::size_t i = mStart[k]; i < mStart[k + 1]; ++i) triangles.push_back(triangle(FaceHandle(mOwned[i])));
             const int self = int(k);
-            if (crosses(made, scratch, [&](int fi, const std::array<int, 3>&) {
+            if (crosses(triangles, scratch, [&](int fi, const std::array<int, 3>&) {
                     const int owner = mOwner[std::size_t(fi)];
                     return owner >= 0 && owner <= self;
                 }))

@@ -16,12 +16,6 @@
 
 namespace riemesh::detail {
 
-/// The guard's grid kept from one regularity step to the next (RegularityCache). Each vertex has
-/// a reference position, each face is entered with the box of its corners' references grown by
-/// a margin: while every corner stays within the margin of its reference (on each axis), the
-/// face stays within that box. A step gives a vertex that has left its reference, or whose faces
-/// an edit changed (kGuardEditedProperty), a new reference and enters its faces again: a pass
-/// over the vertices instead of one over the faces and their boxes.
 /// What a regularity step's edits made without asking the guard (see
 /// IntersectionGuard::facesAroundAreClear): the vertices all of whose faces an edit made or moved
 /// (a collapse's kept vertex, the new vertex of a split of such a face), and the two faces each
@@ -36,6 +30,12 @@ struct MadeFaces {
     }
 };
 
+/// The guard's grid kept from one regularity step to the next (RegularityCache). Each vertex has
+/// a reference position, each face is entered with the box of its corners' references grown by
+/// a margin: while every corner stays within the margin of its reference (on each axis), the
+/// face stays within that box. A step gives a vertex that has left its reference, or whose faces
+/// an edit changed (kGuardEditedProperty), a new reference and enters its faces again: a pass
+/// over the vertices instead of one over the faces and their boxes.
 struct GuardGrid {
     CentreGrid grid;
     std::vector<Box6> loose; ///< by face index: the box the face was entered with
