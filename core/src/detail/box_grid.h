@@ -20,6 +20,10 @@
 #include <limits>
 #include <vector>
 
+#if defined(__SSE2__)
+#include <emmintrin.h>
+#endif
+
 namespace riemesh::detail {
 
 /// lo xyz, hi xyz.
@@ -421,19 +425,19 @@ public:
         mSparse = false;
         mStart.assign(buckets + 1, 0);
         for (const Item& it : mItems)
-            if (it.inCells) forCells(it, [&](std::uint64_t key, std::uint8_t) { ++mStart[bucketOf(key) + 1]; });
+            if (it.inCells) forCells(it, [&](std::uint64_t, std::size_t bucket, std::uint8_t) { ++mStart[bucket + 1]; });
         for (std::size_t b = 0; b < buckets; ++b) mStart[b + 1] += mStart[b];
         mEntries.resize(entries);
         mFill.assign(mStart.begin(), mStart.end() - 1);
         for (std::size_t i = 0; i < mItems.size(); ++i) {
             const Item& it = mItems[i];
             if (!it.inCells) continue;
-            forCells(it, [&](std::uint64_t key, std::uint8_t lowest) {
+            forCells(it, [&](std::uint64_t key, std::size_t bucket, std::uint8_t lowest) {
                 // Written in place: an Entry made on the stack and copied was stored and loaded
                 // back in pieces that did not match (a store-to-load forwarding stall per entry).
                 // Head MRI, guarded, one thread: the three grids of a step from scratch at 6,600
                 // vertices built in 3.7-5.2 ms that way, 2.7-3.7 ms this way.
-                Entry& e = mEntries[mFill[bucketOf(key)]++];
+                Entry& e = mEntries[mFill[bucket]++];
                 e.key = key;
                 e.item = std::int32_t(i);
                 e.box = it.box;
@@ -460,7 +464,7 @@ public:
                 mLarge.push_back(Entry{0, std::int32_t(i), it.box, 0});
                 continue;
             }
-            forCells(it, [&](std::uint64_t key, std::uint8_t lowest) {
+            forCells(it, [&](std::uint64_t key, std::size_t, std::uint8_t lowest) {
                 mEntries.emplace_back(key, std::int32_t(i), it.box, lowest); // (in place: see build)
             });
         }
@@ -568,6 +572,9 @@ public:
             if (c[std::size_t(k)] > c[std::size_t(k) + 3]) return;
         }
         const std::uint64_t span = std::uint64_t(c[5] - c[2]);
+#if defined(__SSE2__)
+        const __m128 qLo = lowerLanes(qf), qHi = upperLanes(qf);
+#endif
         for (std::int64_t x = c[0]; x <= c[3]; ++x)
             for (std::int64_t y = c[1]; y <= c[4]; ++y) {
                 const std::uint64_t first = packCell(x, y, c[2]);
@@ -586,9 +593,13 @@ public:
                         for (const std::uint32_t stop = std::min(end, i + 32); i < stop; ++i) {
                             const Entry& e = mEntries[i];
                             hits[count] = i;
+#if defined(__SSE2__)
+                            count += int(e.key - first <= span) & int(e.item > after) & overlapsLanes(qLo, qHi, e);
+#else
                             count += int(e.key - first <= span) & int(e.item > after) & int(qf[0] <= e.box[3]) &
                                      int(e.box[0] <= qf[3]) & int(qf[1] <= e.box[4]) & int(e.box[1] <= qf[4]) &
                                      int(qf[2] <= e.box[5]) & int(e.box[2] <= qf[5]);
+#endif
                         }
                         for (int h = 0; h < count; ++h) {
                             const Entry& e = mEntries[hits[h]];
@@ -685,16 +696,17 @@ private:
         }
         return true;
     }
-    /// f(key, lowest) for each cell of a placed item.
+    /// f(key, bucket, lowest) for each cell of a placed item.
     template <class F>
-    static void forCells(const Item& it, F&& f)
+    void forCells(const Item& it, F&& f) const
     {
         for (std::int64_t x = it.first[0]; x <= it.first[0] + it.span[0]; ++x)
             for (std::int64_t y = it.first[1]; y <= it.first[1] + it.span[1]; ++y) {
                 const std::uint64_t column = packCell(x, y, 0);
+                const std::size_t base = columnHash(column); // (the column's buckets: base + z, see bucketOf)
                 const std::uint8_t lowestXY = std::uint8_t((x == it.first[0] ? 1 : 0) | (y == it.first[1] ? 2 : 0));
                 for (std::int64_t z = it.first[2]; z <= it.first[2] + it.span[2]; ++z)
-                    f(column | (std::uint64_t(z) & std::uint64_t(kCoordMask)),
+                    f(column | (std::uint64_t(z) & std::uint64_t(kCoordMask)), (base + std::size_t(z)) & mMask,
                       std::uint8_t(lowestXY | (z == it.first[2] ? 4 : 0)));
             }
     }
@@ -709,18 +721,49 @@ private:
     void meetRun(const Entry& x, std::size_t j0, std::size_t j1, F&& f) const
     {
         std::uint32_t hits[32];
+#if defined(__SSE2__)
+        const __m128 xLo = lowerLanes(x.box), xHi = upperLanes(x.box);
+#endif
         for (std::size_t j = j0; j < j1;) {
             int count = 0;
             for (const std::size_t stop = std::min(j1, j + 32); j < stop; ++j) {
                 const Entry& y = mEntries[j];
                 hits[count] = std::uint32_t(j);
+#if defined(__SSE2__)
+                count += int(x.key == y.key) & int(((x.lowest | y.lowest) & 7) == 7) & overlapsLanes(xLo, xHi, y);
+#else
                 count += int(x.key == y.key) & int(((x.lowest | y.lowest) & 7) == 7) & int(x.box[0] <= y.box[3]) &
                          int(y.box[0] <= x.box[3]) & int(x.box[1] <= y.box[4]) & int(y.box[1] <= x.box[4]) &
                          int(x.box[2] <= y.box[5]) & int(y.box[2] <= x.box[5]);
+#endif
             }
             for (int h = 0; h < count; ++h) f(mEntries[hits[h]]);
         }
     }
+#if defined(__SSE2__)
+    /// A box's lower corner, and its upper corner, as the lanes overlapsLanes() compares an
+    /// entry's box with (the spare lane: a comparison that holds).
+    static __m128 lowerLanes(const std::array<float, 6>& b)
+    {
+        return _mm_setr_ps(-std::numeric_limits<float>::infinity(), b[0], b[1], b[2]);
+    }
+    static __m128 upperLanes(const std::array<float, 6>& b)
+    {
+        return _mm_setr_ps(b[3], b[4], b[5], std::numeric_limits<float>::infinity());
+    }
+    /// 1 if the entry's box overlaps the box of lanes lo, hi (lowerLanes, upperLanes), else 0:
+    /// two comparisons of four lanes instead of six scalar ones, in the inner loops of the
+    /// pairings and queries: its lo xyz, hi x against hi (hi x <= +inf), and lo against its
+    /// lo z, hi xyz (-inf <= lo z). The entries' boxes are finite (the large ones are apart).
+    /// Guarded evolution, one thread, instructions of the collision-safe steps: phantom 100^3
+    /// 435 -> 398 M, head MRI (iso 40) 1,152 -> 1,063 M; the same meshes.
+    static int overlapsLanes(__m128 lo, __m128 hi, const Entry& e)
+    {
+        const int below = _mm_movemask_ps(_mm_cmple_ps(_mm_loadu_ps(&e.box[0]), hi));
+        const int above = _mm_movemask_ps(_mm_cmple_ps(lo, _mm_loadu_ps(&e.box[2])));
+        return int((below & above) == 15);
+    }
+#endif
     static bool overlapsF(const std::array<float, 6>& a, const std::array<float, 6>& b)
     {
         return a[0] <= b[3] && b[0] <= a[3] && a[1] <= b[4] && b[1] <= a[4] && a[2] <= b[5] && b[2] <= a[5];
@@ -741,11 +784,9 @@ private:
         return true;
     }
     /// The column's hash plus z: consecutive cells along z are consecutive buckets.
-    std::size_t bucketOf(std::uint64_t key) const
-    {
-        const std::uint64_t column = key >> 21;
-        return std::size_t(((column * 0x9E3779B97F4A7C15ull) >> 32) + (key & kCoordMask)) & mMask;
-    }
+    std::size_t bucketOf(std::uint64_t key) const { return (columnHash(key) + std::size_t(key & kCoordMask)) & mMask; }
+    /// The hash of a key's column (its x and y).
+    static std::size_t columnHash(std::uint64_t key) { return std::size_t(((key >> 21) * 0x9E3779B97F4A7C15ull) >> 32); }
 
     double mInvCell = 1.0;
     std::array<double, 3> mOrigin = {0, 0, 0};
