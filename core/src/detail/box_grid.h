@@ -277,6 +277,15 @@ public:
         if (mEntries.size() > 2 * mHead.size()) compact();
     }
 
+    /// The box `item` was last entered with, or null if it has none (never entered, or beyond the
+    /// items entered).
+    const Box6* boxOf(int item) const
+    {
+        if (item < 0 || std::size_t(item) >= mItems.size()) return nullptr;
+        const Item& it = mItems[std::size_t(item)];
+        return it.entered || it.wide ? &it.box : nullptr;
+    }
+
     /// Entries held, stale ones included (bounded: see compact()).
     std::size_t entryCount() const { return mEntries.size(); }
 
@@ -320,13 +329,13 @@ private:
         std::int32_t next;
         std::int32_t entry; ///< the item's entry count when it was made (stale unless its latest)
     };
-    struct Item {
+    struct Item { // (64 bytes: a cache line's worth)
         Box6 box{};
         std::uint64_t key = 0;
-        bool entered = false; ///< has an entry in the cell `key`
         std::int32_t entry = 0; ///< how many entries it was given (the latest is the one that counts)
-        bool wide = false;    ///< wider than 0.9 cell: tested by every query
-        bool listed = false;  ///< in mWide
+        bool entered = false;   ///< has an entry in the cell `key`
+        bool wide = false;      ///< wider than 0.9 cell: tested by every query
+        bool listed = false;    ///< in mWide
     };
     /// Queries spanning more cells than this on an axis test every item instead.
     static constexpr std::int64_t kMaxSpan = 64;

@@ -17,9 +17,6 @@ namespace {
 /// entered again per regularity step (see RegularityCache in riemesh/regularity.h).
 constexpr double kGuardMargin = 0.1;
 
-/// A face's box before it is entered: contains nothing (see GuardGrid::loose).
-constexpr Box6 kNoBox = {1, 1, 1, -1, -1, -1};
-
 /// `inner` lies within `outer` (closed).
 bool contains(const Box6& outer, const Box6& inner)
 {
@@ -69,11 +66,8 @@ void IntersectionGuard::enter(FaceHandle f)
         box[k] = std::min({x0, x1, x2}) - g.margin;
         box[k + 3] = std::max({x0, x1, x2}) + g.margin;
     }
-    if (i >= g.loose.size()) g.loose.resize(i + 1, kNoBox);
-    Box6& loose = g.loose[i];
-    if (contains(loose, box)) return;
-    loose = box;
-    g.grid.insert(f.idx(), loose);
+    if (const Box6* entered = g.grid.boxOf(int(i)); entered && contains(*entered, box)) return;
+    g.grid.insert(int(i), box);
 }
 
 bool IntersectionGuard::renewReference(VertexHandle v)
@@ -104,7 +98,7 @@ void IntersectionGuard::build()
     // are entered again (in index order: the grid is not thread-safe). Built anew when the mesh
     // has grown or shrunk twofold since (the cells were sized for its faces then).
     const std::size_t nv = mMesh.n_vertices(), nf = mMesh.n_faces();
-    if (g.valid && nv >= g.ref.size() && nf >= g.loose.size()) { // (fewer: renumbered, see RegularityCache)
+    if (g.valid && nv >= g.ref.size() && nf >= g.faces) { // (fewer: renumbered, see RegularityCache)
         g.ref.resize(nv, Vec3::Constant(none));
         g.moved.assign(nv, 0);
         forLive<VertexHandle>(mMesh, nv, 2048, [&](std::size_t i) {
@@ -124,7 +118,7 @@ void IntersectionGuard::build()
                 g.ref[std::size_t(i)] = position(mMesh, VertexHandle(i));
                 marked[std::size_t(i)] = 0;
             }
-            g.loose.resize(nf, kNoBox);
+            g.faces = nf;
             g.seen.resize(nf, 0u);
             if (++g.stamp == 0) std::fill(g.seen.begin(), g.seen.end(), 0u), g.stamp = 1;
             for (const int i : g.flagged)
@@ -164,12 +158,8 @@ void IntersectionGuard::build()
         ++g.vertices;
     }
     std::fill(marked.begin(), marked.end(), 0);
-    g.loose.assign(nf, kNoBox);
-    for (auto f : mMesh.faces()) {
-        Box6& loose = g.loose[std::size_t(f.idx())];
-        loose = grownBy(mBoxes[std::size_t(f.idx())], g.margin);
-        g.grid.insert(f.idx(), loose);
-    }
+    g.faces = nf;
+    for (auto f : mMesh.faces()) g.grid.insert(f.idx(), grownBy(mBoxes[std::size_t(f.idx())], g.margin));
 }
 
 void IntersectionGuard::update(VertexHandle v)

@@ -38,10 +38,10 @@ struct MadeFaces {
 /// over the vertices instead of one over the faces and their boxes.
 struct GuardGrid {
     CentreGrid grid;
-    std::vector<Box6> loose; ///< by face index: the box the face was entered with
     std::vector<Vec3> ref;   ///< by vertex index: its reference (NaN: none yet)
     double margin = 0;       ///< world units
     std::size_t vertices = 0; ///< live vertices when the grid was built
+    std::size_t faces = 0;    ///< faces (deleted ones included) when it was last brought up to date
     bool valid = false;
     std::vector<char> moved;   ///< (scratch: by vertex index, to be given a new reference)
     std::vector<int> flagged;  ///< (scratch: those vertices)
