@@ -364,7 +364,12 @@ IterationStats Evolution::step()
         copySafeStepParts(mMesh, beside.mesh);
         for (auto v : mMesh.all_vertices()) mMesh.property(edited, v) = 0;
         regularityMode = mRegularityCache.mode();
-        beside.job.run([this, so] {
+        // The edit guard's grid is brought up to date there too, first (the regularity step's
+        // first guard waits for it): a pass over the vertices and the faces of those that moved
+        // entered again, sequential, was the regularity step's work before.
+        const bool guardBeside = mRegularityCache.handOver(mMesh, beside.mesh);
+        beside.job.run([this, so, guardBeside] {
+            if (guardBeside) mRegularityCache.bringUpToDate(mBeside->mesh);
             mBeside->stats = limitStepToCollisionFree(mBeside->mesh, mStepStart, so, &mSafeStepCache);
         });
     }

@@ -825,6 +825,9 @@ void RegularityCache::setMode(const Mode& mode)
     mImpl->lastEdits = mode.lastEdits;
     mImpl->pause = mode.pause;
 }
+bool RegularityCache::handOver(Mesh& mesh, Mesh& snapshot) { return detail::handOverMarks(mesh, snapshot, mImpl->guard); }
+void RegularityCache::bringUpToDate(Mesh& snapshot) { detail::bringUpToDateFrom(snapshot, mImpl->guard); }
+
 void RegularityCache::invalidate()
 {
     mImpl->guard.valid = false;
@@ -890,6 +893,13 @@ RegularityStats enforceRegularity(Mesh& mesh, const MetricField& metric, const R
     if (!(options.zeta > 1.0)) throw std::invalid_argument("enforceRegularity: zeta must be > 1");
     detail::GuardGrid own;
     detail::GuardGrid* kept = cache ? &cache->impl().guard : &own;
+    // Brought up to date beside this call (RegularityCache::handOver): waited for by the first
+    // guard, or here at the end if none asked (the grid then holds the faces as the call found
+    // them, and the marks of its edits are left for the next).
+    struct Settle {
+        detail::GuardGrid& g;
+        ~Settle() { g.takeBeside(); }
+    } settle{*kept};
     if (!options.intersectionFree) return regularize(mesh, metric, options, kept, nullptr);
     // Together when the last call made many edits and none of the last kPauseAfterRedone calls had
     // to be made again (or with no cache): the copy of the mesh costs about as much as what

@@ -16,6 +16,7 @@
 #include <cmath>
 #include <random>
 #include <stdexcept>
+#include <thread>
 #include <vector>
 
 using namespace riemesh;
@@ -512,6 +513,127 @@ TEST_CASE("regularity: the edit guard's grid kept from call to call makes the sa
         c = a; // (the unguarded copy starts each call from the guarded mesh)
     }
     CHECK(guardMattered);
+}
+
+TEST_CASE("regularity: the edit guard's grid brought up to date on another thread makes the same mesh")
+{
+    // As Evolution runs it beside the collision-safe step: before each call the guard's marks are
+    // handed over to a copy of the mesh (RegularityCache::handOver), from which another thread
+    // brings the kept grid up to date (bringUpToDate) while the call begins; its first guard waits
+    // for that, then enters only the faces its own edits changed. The same mesh as without a
+    // cache, call after call, edits asked in turn and checked together; and the guard refuses
+    // edits the unguarded step makes.
+    for (const bool together : {false, true}) {
+        CAPTURE(together);
+        const EuclideanMetric metric;
+        Mesh a = sphereInSphere();
+        Mesh b = a, c = a;
+        std::mt19937 rng(2029);
+        RegularityOptions guarded;
+        guarded.delta = 0.05;
+        guarded.maxPasses = 2;
+        guarded.intersectionFree = true;
+        guarded.minSeparation = 1e-4;
+        guarded.checkEditsTogether = together;
+        RegularityOptions plain = guarded;
+        plain.intersectionFree = false;
+        RegularityCache cache;
+        bool guardMattered = false;
+        int handed = 0;
+        for (int it = 0; it < 40; ++it) {
+            guarded.delta = plain.delta = 0.05 + 0.004 * it;
+            turnAndJitter(rng, {&a, &b, &c});
+            Mesh snapshot = a;
+            const bool hand = cache.handOver(a, snapshot);
+            handed += hand;
+            std::thread beside;
+            if (hand) beside = std::thread([&] { cache.bringUpToDate(snapshot); });
+            const auto sa = enforceRegularity(a, metric, guarded, &cache);
+            if (beside.joinable()) beside.join();
+            const auto sb = enforceRegularity(b, metric, guarded);
+            const auto sc = enforceRegularity(c, metric, plain);
+            CAPTURE(it);
+            REQUIRE_MESH_OK(a);
+            CHECK(sa.collapses == sb.collapses);
+            CHECK(sa.flips == sb.flips);
+            CHECK(sameMesh(a, b));
+            guardMattered = guardMattered || sa.collapses != sc.collapses || sa.flips != sc.flips || a.n_faces() != c.n_faces();
+            if (it % 8 == 7) {
+                a.garbage_collection();
+                b.garbage_collection();
+                cache.invalidate();
+            }
+            c = a;
+        }
+        CHECK(handed >= 35); // (all but the first call: the guard's marks exist from then on)
+        CHECK(guardMattered);
+    }
+}
+
+TEST_CASE("edit guard: a grid brought up to date on another thread holds every live face when first asked")
+{
+    // The invariant the guard's answers rest on: when it first looks at its grid in a call, every
+    // live face lies within the box the grid holds for it. The sphere in a sphere turned and
+    // jittered every other time (faces leave their boxes), edited at random before the copy is
+    // taken (splits, collapses and flips: their marks go with the copy, see
+    // detail::handOverMarks) and after (the call's own edits, marked in the mesh), the grid
+    // brought up to date from the copy on another thread while the edits after are made (or
+    // called off, if that thread has not begun when the guard first looks). Without entering the
+    // faces of the marked vertices after, or without waiting for the other thread, some face
+    // lies outside its box.
+    Mesh mesh = sphereInSphere();
+    std::mt19937 rng(31);
+    detail::GuardGrid grid;
+    detail::IntersectionGuard(mesh, 0.0, &grid).bringUpToDate(); // (built: the marks exist from now on)
+    auto editAtRandom = [&](int count) {
+        int made = 0;
+        for (int tries = 0; made < count && tries < 50 * count; ++tries) {
+            const EdgeHandle e(int(rng() % mesh.n_edges()));
+            if (mesh.status(e).deleted()) continue;
+            const HalfedgeHandle h = mesh.halfedge_handle(e, 0);
+            const Vec3 mid = 0.5 * (position(mesh, mesh.from_vertex_handle(h)) + position(mesh, mesh.to_vertex_handle(h)));
+            switch (rng() % 3) {
+            case 0: made += split(mesh, e, mid).is_valid(); break;
+            case 1:
+                if (canCollapse(mesh, h, mid)) made += collapse(mesh, h, mid).is_valid();
+                break;
+            default:
+                if (canFlip(mesh, e)) flip(mesh, e), ++made;
+            }
+        }
+        return made;
+    };
+    int entered = 0;
+    for (int it = 0; it < 30; ++it) {
+        if (it % 2 == 0) turnAndJitter(rng, {&mesh}); // (between: only the edits' marks tell what changed)
+        editAtRandom(20);
+        Mesh snapshot = mesh;
+        REQUIRE(detail::handOverMarks(mesh, snapshot, grid));
+        const bool late = it % 3 == 2; // (the other thread begins after the guard's first look: called off)
+        std::thread beside;
+        if (!late) beside = std::thread([&] { detail::bringUpToDateFrom(snapshot, grid); });
+        entered += editAtRandom(20);
+        detail::IntersectionGuard guard(mesh, 0.0, &grid);
+        CHECK(guard.facesAroundAreClear(detail::MadeFaces{})); // (its first look: waits, enters the marked)
+        if (late) beside = std::thread([&] { detail::bringUpToDateFrom(snapshot, grid); });
+        beside.join();
+        CAPTURE(it);
+        std::size_t outside = 0;
+        for (auto f : mesh.faces()) {
+            const detail::Box6* box = grid.grid.boxOf(f.idx());
+            bool inside = box != nullptr;
+            for (auto v = mesh.cfv_begin(f); inside && v.is_valid(); ++v)
+                for (int k = 0; k < 3; ++k)
+                    inside = inside && (*box)[k] <= mesh.point(*v)[k] && mesh.point(*v)[k] <= (*box)[k + 3];
+            outside += !inside;
+        }
+        CHECK(outside == 0);
+        if (it % 10 == 9) {
+            mesh.garbage_collection();
+            grid.valid = false; // (renumbered: built anew, as RegularityCache::invalidate does)
+        }
+    }
+    CHECK(entered > 300);
 }
 
 TEST_CASE("regularity: edits checked together make the same mesh as checked in turn, or one without crossings")

@@ -70,6 +70,17 @@ public:
     };
     Mode mode() const;
     void setMode(const Mode& mode);
+    /// The guard's grid brought up to date on another thread while the next call begins (the
+    /// work of its first guard question: a pass over the vertices, the faces of those that moved
+    /// entered again), from `snapshot`, a copy of `mesh` as that call will find it (points,
+    /// connectivity and statuses, as Evolution::step copies them for the collision-safe step):
+    /// handOver() (on the caller's thread) copies the guard's edit marks of `mesh` to `snapshot`
+    /// and returns false if there is nothing to hand over (no marks: the call then builds its
+    /// grid itself); bringUpToDate(snapshot) then runs on the other thread. The call waits for it
+    /// where it first needs the grid if it has begun, else calls it off and does that work
+    /// itself. Nothing may edit `mesh` between the two but that call.
+    bool handOver(Mesh& mesh, Mesh& snapshot);
+    void bringUpToDate(Mesh& snapshot);
 
     struct Impl;
     Impl& impl() { return *mImpl; } ///< (regularity.cpp's)

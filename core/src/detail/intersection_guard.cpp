@@ -9,6 +9,7 @@
 #include <cmath>
 #include <atomic>
 #include <limits>
+#include <thread>
 
 namespace riemesh::detail {
 
@@ -82,7 +83,68 @@ bool IntersectionGuard::renewReference(VertexHandle v)
     return true;
 }
 
+bool GuardGrid::takeBeside()
+{
+    int state = kPending;
+    if (beside.compare_exchange_strong(state, kNone, std::memory_order_acq_rel)) return false; // (called off)
+    if (state == kNone) return false;
+    while (state == kRunning) { // (a fraction of a millisecond)
+        std::this_thread::yield();
+        state = beside.load(std::memory_order_acquire);
+    }
+    beside.store(kNone, std::memory_order_relaxed);
+    return true;
+}
+
 void IntersectionGuard::build()
+{
+    mBuilt = true;
+    if (mKept->takeBeside() && enterMarked()) return;
+    bringUpToDate();
+}
+
+bool IntersectionGuard::enterMarked()
+{
+    GuardGrid& g = *mKept;
+    OpenMesh::VPropHandleT<char> marks;
+    const std::size_t nv = mMesh.n_vertices(), nf = mMesh.n_faces();
+    if (!g.valid || !mMesh.get_property_handle(marks, kGuardEditedProperty) || nv < g.ref.size() || nf < g.faces)
+        return false;
+    // Brought up to date from the mesh as the regularity step found it: since, only the step's
+    // edits have moved vertices or changed faces, and they marked their vertices. (The marks from
+    // before, which the copy had, are here too: their faces, entered beside, are found in place.)
+    std::vector<char>& marked = mMesh.property(marks).data_vector();
+    g.ref.resize(nv, Vec3::Constant(std::numeric_limits<double>::quiet_NaN()));
+    g.flagged.clear();
+    for (std::size_t i = 0; i < nv; ++i)
+        if (marked[i] && !mMesh.status(VertexHandle(int(i))).deleted()) g.flagged.push_back(int(i));
+    enterFlagged(marked);
+    return true;
+}
+
+void IntersectionGuard::enterFlagged(std::vector<char>& marked)
+{
+    GuardGrid& g = *mKept;
+    const std::size_t nf = mMesh.n_faces();
+    // Every new reference first, then the faces (a face entered before one of its corners had its
+    // new reference would keep a box around the old one).
+    for (const int i : g.flagged) {
+        g.ref[std::size_t(i)] = position(mMesh, VertexHandle(i));
+        marked[std::size_t(i)] = 0;
+    }
+    g.faces = nf;
+    g.seen.resize(nf, 0u);
+    if (++g.stamp == 0) std::fill(g.seen.begin(), g.seen.end(), 0u), g.stamp = 1;
+    for (const int i : g.flagged)
+        for (auto f = mMesh.cvf_begin(VertexHandle(i)); f.is_valid(); ++f) {
+            unsigned& seen = g.seen[std::size_t(f->idx())];
+            if (seen == g.stamp) continue;
+            seen = g.stamp;
+            enter(*f);
+        }
+}
+
+void IntersectionGuard::bringUpToDate()
 {
     mBuilt = true;
     GuardGrid& g = *mKept;
@@ -112,22 +174,7 @@ void IntersectionGuard::build()
             if (g.moved[i]) g.flagged.push_back(int(i));
         }
         if (2 * live >= g.vertices && live <= 2 * g.vertices) {
-            // Every new reference first, then the faces (a face entered before one of its corners
-            // had its new reference would keep a box around the old one).
-            for (const int i : g.flagged) {
-                g.ref[std::size_t(i)] = position(mMesh, VertexHandle(i));
-                marked[std::size_t(i)] = 0;
-            }
-            g.faces = nf;
-            g.seen.resize(nf, 0u);
-            if (++g.stamp == 0) std::fill(g.seen.begin(), g.seen.end(), 0u), g.stamp = 1;
-            for (const int i : g.flagged)
-                for (auto f = mMesh.cvf_begin(VertexHandle(i)); f.is_valid(); ++f) {
-                    unsigned& seen = g.seen[std::size_t(f->idx())];
-                    if (seen == g.stamp) continue;
-                    seen = g.stamp;
-                    enter(*f);
-                }
+            enterFlagged(marked);
             return;
         }
     }
@@ -346,6 +393,30 @@ bool IntersectionGuard::isFlipSafe(EdgeHandle e)
     if (!mBuilt) build();
     const int goneFaces[2] = {mMesh.face_handle(h).idx(), mMesh.face_handle(o).idx()};
     return !crosses(mMade, mScratch, [&](int fi, const std::array<int, 3>&) { return fi == goneFaces[0] || fi == goneFaces[1]; });
+}
+
+bool handOverMarks(Mesh& mesh, Mesh& snapshot, GuardGrid& g)
+{
+    OpenMesh::VPropHandleT<char> from, to;
+    if (!mesh.get_property_handle(from, kGuardEditedProperty)) return false;
+    if (!snapshot.get_property_handle(to, kGuardEditedProperty)) snapshot.add_property(to, kGuardEditedProperty);
+    snapshot.property(to).data_vector() = mesh.property(from).data_vector();
+    g.beside.store(GuardGrid::kPending, std::memory_order_release);
+    return true;
+}
+
+void bringUpToDateFrom(Mesh& snapshot, GuardGrid& g)
+{
+    int state = GuardGrid::kPending;
+    if (!g.beside.compare_exchange_strong(state, GuardGrid::kRunning, std::memory_order_acq_rel)) return; // (called off)
+    try {
+        IntersectionGuard(snapshot, 0.0, &g).bringUpToDate();
+    } catch (...) {
+        g.valid = false; // (built anew where it is waited for)
+        g.beside.store(GuardGrid::kReady, std::memory_order_release);
+        throw;
+    }
+    g.beside.store(GuardGrid::kReady, std::memory_order_release);
 }
 
 } // namespace riemesh::detail

@@ -12,6 +12,7 @@
 #include "detail/box_grid.h"
 
 #include <array>
+#include <atomic>
 #include <vector>
 
 namespace riemesh::detail {
@@ -37,6 +38,17 @@ struct MadeFaces {
 /// an edit changed (kGuardEditedProperty), a new reference and enters its faces again: a pass
 /// over the vertices instead of one over the faces and their boxes.
 struct GuardGrid {
+    /// Brought up to date on another thread (RegularityCache::bringUpToDate, from a copy of the
+    /// mesh as the regularity step finds it): kPending until that thread begins, kRunning while
+    /// it works, kReady after. The step's first guard (IntersectionGuard::build) takes it: if
+    /// the other thread has not begun, it is called off (kNone: that thread does nothing, the
+    /// guard brings the grid up to date itself, as without); else, once kReady, the guard enters
+    /// only the faces around the vertices marked since (kGuardEditedProperty) and sets kNone.
+    enum : int { kNone = 0, kPending = 1, kRunning = 2, kReady = 3 };
+    std::atomic<int> beside{kNone};
+    /// kNone after; true if it was brought up to date beside (waited for if under way), false if
+    /// not (or called off before it began).
+    bool takeBeside();
     CentreGrid grid;
     std::vector<Vec3> ref;   ///< by vertex index: its reference (NaN: none yet)
     double margin = 0;       ///< world units
@@ -69,6 +81,9 @@ public:
     /// corner of both new faces): enters them with their new boxes (v's reference renewed if it
     /// moved off it).
     void update(VertexHandle v);
+    /// The grid (`kept`) made to hold every live face of the mesh, from its marks and the
+    /// references (the work of the first question; public for RegularityCache::bringUpToDate).
+    void bringUpToDate();
     /// After edits made without asking (see RegularityOptions::checkEditsTogether): the live faces
     /// around the vertices made.vertices and the live faces of made.flipped cross no face and come
     /// no closer than minSeparation to a face they share no vertex with (the tests of
@@ -86,6 +101,12 @@ private:
         std::vector<int> near;
     };
     void build();
+    /// After the grid was brought up to date beside (GuardGrid::beside): the faces around the
+    /// vertices the edits marked since entered again; false if it cannot tell (then build anew).
+    bool enterMarked();
+    /// The flagged vertices (GuardGrid::flagged) given their positions as references, their
+    /// marks cleared, their faces entered again (each once).
+    void enterFlagged(std::vector<char>& marked);
     /// Enters face f with the box of its corners' references, unless the box it has holds that.
     void enter(FaceHandle f);
     /// Gives v its position as reference if it is off its reference (or has none); true if so.
@@ -109,5 +130,14 @@ private:
     std::vector<std::size_t> mStart; // (facesAroundAreClear's)
     std::vector<int> mOwned;         // (facesAroundAreClear's)
 };
+
+/// RegularityCache::handOver's work on the guard's grid `g`: the guard's marks of `mesh` copied to
+/// `snapshot` (a copy of it; they stay in `mesh`: they are its next guard's to clear), g marked
+/// kPending; false (nothing done) if `mesh` has no marks.
+bool handOverMarks(Mesh& mesh, Mesh& snapshot, GuardGrid& g);
+/// RegularityCache::bringUpToDate's: unless called off (see GuardGrid::beside), g brought up to
+/// date from `snapshot`, then kReady (also if that throws: g is then invalid, built anew by the
+/// guard that waits for it).
+void bringUpToDateFrom(Mesh& snapshot, GuardGrid& g);
 
 } // namespace riemesh::detail
