@@ -14,6 +14,7 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <functional>
 #include <random>
 #include <stdexcept>
 #include <thread>
@@ -105,6 +106,24 @@ void turnAndJitter(std::mt19937& rng, std::initializer_list<Mesh*> meshes)
         for (Mesh* m : meshes) m->set_point(v, toPoint(q));
     }
 }
+
+/// Runs a job on another thread, as Evolution runs the work beside its regularity step; at once
+/// where there are no threads (a WebAssembly build without them). join() waits for it.
+struct BesideJob {
+    std::thread thread;
+    void run(std::function<void()> job)
+    {
+#if defined(__EMSCRIPTEN__) && !defined(__EMSCRIPTEN_PTHREADS__)
+        job();
+#else
+        thread = std::thread(std::move(job));
+#endif
+    }
+    void join()
+    {
+        if (thread.joinable()) thread.join();
+    }
+};
 
 std::vector<Vec3> positions(const Mesh& mesh)
 {
@@ -546,10 +565,10 @@ TEST_CASE("regularity: the edit guard's grid brought up to date on another threa
             Mesh snapshot = a;
             const bool hand = cache.handOver(a, snapshot);
             handed += hand;
-            std::thread beside;
-            if (hand) beside = std::thread([&] { cache.bringUpToDate(snapshot); });
+            BesideJob beside;
+            if (hand) beside.run([&] { cache.bringUpToDate(snapshot); });
             const auto sa = enforceRegularity(a, metric, guarded, &cache);
-            if (beside.joinable()) beside.join();
+            beside.join();
             const auto sb = enforceRegularity(b, metric, guarded);
             const auto sc = enforceRegularity(c, metric, plain);
             CAPTURE(it);
@@ -610,12 +629,12 @@ TEST_CASE("edit guard: a grid brought up to date on another thread holds every l
         Mesh snapshot = mesh;
         REQUIRE(detail::handOverMarks(mesh, snapshot, grid));
         const bool late = it % 3 == 2; // (the other thread begins after the guard's first look: called off)
-        std::thread beside;
-        if (!late) beside = std::thread([&] { detail::bringUpToDateFrom(snapshot, grid); });
+        BesideJob beside;
+        if (!late) beside.run([&] { detail::bringUpToDateFrom(snapshot, grid); });
         entered += editAtRandom(20);
         detail::IntersectionGuard guard(mesh, 0.0, &grid);
         CHECK(guard.facesAroundAreClear(detail::MadeFaces{})); // (its first look: waits, enters the marked)
-        if (late) beside = std::thread([&] { detail::bringUpToDateFrom(snapshot, grid); });
+        if (late) beside.run([&] { detail::bringUpToDateFrom(snapshot, grid); });
         beside.join();
         CAPTURE(it);
         std::size_t outside = 0;
