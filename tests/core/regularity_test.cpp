@@ -487,34 +487,44 @@ TEST_CASE("regularity: collapses decided in parallel first make the same mesh as
     CHECK(refused > 30); // (refusals to decide: the verdicts that must stay valid across collapses)
 }
 
-TEST_CASE("regularity: the edit guard's grid kept from call to call makes the same mesh as one built at each call")
+namespace {
+
+/// The sphere in a sphere, coarsened, turned and jittered call after call, guarded (edits asked
+/// in turn, or checked together): with a RegularityCache and without, the same vertices and
+/// faces at every call (the cache forgotten at each garbage collection, as Evolution does). With
+/// `handOver`, before each call the guard's marks are handed over to a copy of the mesh
+/// (RegularityCache::handOver), from which another thread brings the kept grid up to date
+/// (bringUpToDate) while the call begins, as Evolution runs it beside the collision-safe step.
+/// Without the guard the mesh differs: a collapse on the outer sphere cuts a chord toward the
+/// inner one, which the guard refuses.
+void checkCachedGuardMakesTheSameMesh(unsigned seed, bool together, bool handOver)
 {
-    // A sphere inside another 0.02 larger, coarsened, turned and jittered call after call, guarded: with
-    // a RegularityCache (faces entered again only once they leave their grown boxes, the grid
-    // compacted as entries pile up, forgotten at each garbage collection as Evolution does) and
-    // without, the same vertices and faces at every call. Without the guard the mesh differs: a
-    // collapse on the outer sphere cuts a chord toward the inner one, which the guard refuses.
     const EuclideanMetric metric;
     Mesh a = sphereInSphere();
     Mesh b = a, c = a;
-    std::mt19937 rng(2027);
+    std::mt19937 rng(seed);
     RegularityOptions guarded;
     guarded.delta = 0.05;
     guarded.maxPasses = 2;
     guarded.intersectionFree = true;
     guarded.minSeparation = 1e-4;
-    // (Each edit asked in turn: with a cache, edits are checked together only after calls with
-    // many edits, and not right after one that had to be made again; without, always. That
-    // mode has its own test below.)
-    guarded.checkEditsTogether = false;
+    guarded.checkEditsTogether = together;
     RegularityOptions plain = guarded;
     plain.intersectionFree = false;
     RegularityCache cache;
     bool guardMattered = false;
+    int handed = 0;
     for (int it = 0; it < 40; ++it) {
         guarded.delta = plain.delta = 0.05 + 0.004 * it; // (coarsening: collapses, some across the gap)
         turnAndJitter(rng, {&a, &b, &c});
+        Mesh snapshot;
+        BesideJob beside;
+        if (handOver) {
+            snapshot = a;
+            if (cache.handOver(a, snapshot)) ++handed, beside.run([&] { cache.bringUpToDate(snapshot); });
+        }
         const auto sa = enforceRegularity(a, metric, guarded, &cache);
+        beside.join();
         const auto sb = enforceRegularity(b, metric, guarded);
         const auto sc = enforceRegularity(c, metric, plain);
         CAPTURE(it);
@@ -531,61 +541,28 @@ TEST_CASE("regularity: the edit guard's grid kept from call to call makes the sa
         }
         c = a; // (the unguarded copy starts each call from the guarded mesh)
     }
+    if (handOver) CHECK(handed >= 35); // (all but the first call: the guard's marks exist from then on)
     CHECK(guardMattered);
+}
+
+} // namespace
+
+TEST_CASE("regularity: the edit guard's grid kept from call to call makes the same mesh as one built at each call")
+{
+    // Faces entered again only once they leave their grown boxes, the grid compacted as entries
+    // pile up. (Each edit asked in turn: with a cache, edits are checked together only after
+    // calls with many edits, and not right after one that had to be made again; without,
+    // always. That mode has its own test below.)
+    checkCachedGuardMakesTheSameMesh(2027, false, false);
 }
 
 TEST_CASE("regularity: the edit guard's grid brought up to date on another thread makes the same mesh")
 {
-    // As Evolution runs it beside the collision-safe step: before each call the guard's marks are
-    // handed over to a copy of the mesh (RegularityCache::handOver), from which another thread
-    // brings the kept grid up to date (bringUpToDate) while the call begins; its first guard waits
-    // for that, then enters only the faces its own edits changed. The same mesh as without a
-    // cache, call after call, edits asked in turn and checked together; and the guard refuses
-    // edits the unguarded step makes.
+    // Its first guard waits for that thread (or calls it off), then enters only the faces its
+    // own edits changed. Edits asked in turn, and checked together.
     for (const bool together : {false, true}) {
         CAPTURE(together);
-        const EuclideanMetric metric;
-        Mesh a = sphereInSphere();
-        Mesh b = a, c = a;
-        std::mt19937 rng(2029);
-        RegularityOptions guarded;
-        guarded.delta = 0.05;
-        guarded.maxPasses = 2;
-        guarded.intersectionFree = true;
-        guarded.minSeparation = 1e-4;
-        guarded.checkEditsTogether = together;
-        RegularityOptions plain = guarded;
-        plain.intersectionFree = false;
-        RegularityCache cache;
-        bool guardMattered = false;
-        int handed = 0;
-        for (int it = 0; it < 40; ++it) {
-            guarded.delta = plain.delta = 0.05 + 0.004 * it;
-            turnAndJitter(rng, {&a, &b, &c});
-            Mesh snapshot = a;
-            const bool hand = cache.handOver(a, snapshot);
-            handed += hand;
-            BesideJob beside;
-            if (hand) beside.run([&] { cache.bringUpToDate(snapshot); });
-            const auto sa = enforceRegularity(a, metric, guarded, &cache);
-            beside.join();
-            const auto sb = enforceRegularity(b, metric, guarded);
-            const auto sc = enforceRegularity(c, metric, plain);
-            CAPTURE(it);
-            REQUIRE_MESH_OK(a);
-            CHECK(sa.collapses == sb.collapses);
-            CHECK(sa.flips == sb.flips);
-            CHECK(sameMesh(a, b));
-            guardMattered = guardMattered || sa.collapses != sc.collapses || sa.flips != sc.flips || a.n_faces() != c.n_faces();
-            if (it % 8 == 7) {
-                a.garbage_collection();
-                b.garbage_collection();
-                cache.invalidate();
-            }
-            c = a;
-        }
-        CHECK(handed >= 35); // (all but the first call: the guard's marks exist from then on)
-        CHECK(guardMattered);
+        checkCachedGuardMakesTheSameMesh(2029, together, true);
     }
 }
 
