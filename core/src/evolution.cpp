@@ -364,9 +364,10 @@ IterationStats Evolution::step()
         copySafeStepParts(mMesh, beside.mesh);
         for (auto v : mMesh.all_vertices()) mMesh.property(edited, v) = 0;
         regularityMode = mRegularityCache.mode();
-        // The edit guard's grid is brought up to date there too, first (the regularity step's
-        // first guard waits for it): a pass over the vertices and the faces of those that moved
-        // entered again, sequential, was the regularity step's work before.
+        // The edit guard's grid is brought up to date there too, first: a pass over the vertices
+        // and the faces of those that moved entered again, sequential, was the regularity step's
+        // work before. Its first guard waits for that if it has begun, else calls it off and does
+        // it itself (see GuardGrid::beside).
         const bool guardBeside = mRegularityCache.handOver(mMesh, beside.mesh);
         beside.job.run([this, so, guardBeside] {
             if (guardBeside) mRegularityCache.bringUpToDate(mBeside->mesh);

@@ -893,9 +893,10 @@ RegularityStats enforceRegularity(Mesh& mesh, const MetricField& metric, const R
     if (!(options.zeta > 1.0)) throw std::invalid_argument("enforceRegularity: zeta must be > 1");
     detail::GuardGrid own;
     detail::GuardGrid* kept = cache ? &cache->impl().guard : &own;
-    // Brought up to date beside this call (RegularityCache::handOver): waited for by the first
-    // guard, or here at the end if none asked (the grid then holds the faces as the call found
-    // them, and the marks of its edits are left for the next).
+    // Brought up to date beside this call (RegularityCache::handOver): taken by the first guard
+    // (waited for, or called off), or here at the end if none asked (the grid then holds the
+    // faces as the call found them, or as before, and the marks of its edits are left for the
+    // next).
     struct Settle {
         detail::GuardGrid& g;
         ~Settle() { g.takeBeside(); }
